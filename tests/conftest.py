@@ -1,0 +1,31 @@
+import itertools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+
+@pytest.fixture
+def getkey():
+    """Fresh PRNG keys from a fixed seed, so each test is reproducible."""
+    counter = itertools.count()
+    base = jax.random.key(0)
+    return lambda: jax.random.fold_in(base, next(counter))
+
+
+@pytest.fixture
+def x64():
+    """float64 inside the test, where precision matters."""
+    with jax.enable_x64(True):
+        yield
+
+
+def tree_allclose(a, b, rtol=1e-5, atol=1e-8) -> bool:
+    la, lb = jax.tree.leaves(a), jax.tree.leaves(b)
+    return len(la) == len(lb) and all(
+        np.allclose(np.asarray(x), np.asarray(y), rtol=rtol, atol=atol) for x, y in zip(la, lb)
+    )
+
+
+__all__ = ["tree_allclose", "jnp"]
