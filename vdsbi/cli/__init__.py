@@ -1,0 +1,12 @@
+"""Command-line interface: `vdsbi <command> ...`.
+
+Each command lives in its own module exposing `add_parser(subparsers)` (adds and returns its
+argparse sub-parser) and `run(args) -> int` (the exit status). To add a command, write the module
+and list it in `COMMANDS`.
+"""
+
+#: Modules (relative to this package) that each provide one subcommand, in help order.
+COMMANDS: tuple[str, ...] = ("._check",)
+
+from ._main import build_parser as build_parser, main as main  # noqa: E402
+from ._output import output_dir as output_dir  # noqa: E402

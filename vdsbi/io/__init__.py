@@ -1,0 +1,31 @@
+"""Readers and validation for user recordings (CSV, Parquet, ROS2 bags) and vehicle files."""
+
+from ._bag import (
+    AUTOWARE_MSGS as AUTOWARE_MSGS,
+    DEFAULT_TOPIC_MAP as DEFAULT_TOPIC_MAP,
+    TopicField as TopicField,
+    autoware_typestore as autoware_typestore,
+    load_topic_map as load_topic_map,
+    read_bag as read_bag,
+)
+from ._csv import read_csv as read_csv
+from ._drive import (
+    check_against_vehicle as check_against_vehicle,
+    load_drive as load_drive,
+    read_recording as read_recording,
+)
+from ._errors import InputError as InputError
+from ._parquet import read_parquet as read_parquet
+from ._recording import (
+    LIMITS as LIMITS,
+    Recording as Recording,
+    build_recording as build_recording,
+    kinematic_slopes as kinematic_slopes,
+)
+from ._segments import (
+    Segment as Segment,
+    estimate_noise_std as estimate_noise_std,
+    find_segments as find_segments,
+    usable_segments as usable_segments,
+)
+from ._vehicle_file import read_vehicle as read_vehicle

@@ -1,0 +1,237 @@
+"""ROS2 bag reader (sqlite3 and MCAP, through `rosbags`) with a topic map."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..simulator._vehicle import CHANNELS, INPUTS
+from ._errors import InputError
+from ._recording import Recording, build_recording
+
+#: Autoware message definitions (autoware_vehicle_msgs), not in rosbags' built-in typestores.
+AUTOWARE_MSGS: dict[str, str] = {
+    "autoware_vehicle_msgs/msg/VelocityReport": (
+        "std_msgs/Header header\n"
+        "float32 longitudinal_velocity\n"
+        "float32 lateral_velocity\n"
+        "float32 heading_rate\n"
+    ),
+    "autoware_vehicle_msgs/msg/SteeringReport": (
+        "builtin_interfaces/Time stamp\nfloat32 steering_tire_angle\n"
+    ),
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class TopicField:
+    """Where one contract column lives in a bag.
+
+    Attributes:
+        topic: ROS topic name.
+        field: dotted path into the message, with optional list index (``"data[1]"``).
+        scale: factor to SI units (e.g. 0.10472 for rpm -> rad/s).
+    """
+
+    topic: str
+    field: str
+    scale: float = 1.0
+
+
+#: Autoware defaults for IMU, speed and steering; vdsbi's own defaults for the rest
+#: (std_msgs/Float64 per axle torque, std_msgs/Float64MultiArray [front, rear] wheel speeds).
+DEFAULT_TOPIC_MAP: dict[str, TopicField] = {
+    "steer": TopicField("/vehicle/status/steering_status", "steering_tire_angle"),
+    "torque_front": TopicField("/vdsbi/torque_front", "data"),
+    "torque_rear": TopicField("/vdsbi/torque_rear", "data"),
+    "ax": TopicField("/sensing/imu/imu_data", "linear_acceleration.x"),
+    "ay": TopicField("/sensing/imu/imu_data", "linear_acceleration.y"),
+    "yaw_rate": TopicField("/sensing/imu/imu_data", "angular_velocity.z"),
+    "omega_front": TopicField("/vdsbi/wheel_speeds", "data[0]"),
+    "omega_rear": TopicField("/vdsbi/wheel_speeds", "data[1]"),
+    "vx": TopicField("/vehicle/status/velocity_status", "longitudinal_velocity"),
+}
+
+#: Largest accepted gap between two messages of one topic, s: longer gaps cannot be bridged by
+#: linear interpolation without inventing dynamics.
+MAX_TOPIC_GAP = 0.1
+
+_FIELD_RE = re.compile(r"^[A-Za-z_]\w*(\[\d+\])?(\.[A-Za-z_]\w*(\[\d+\])?)*$")
+
+
+def autoware_typestore():
+    """rosbags' ROS2 Humble typestore plus the Autoware vehicle messages."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    types: dict[str, Any] = {}
+    for name, text in AUTOWARE_MSGS.items():
+        types.update(get_types_from_msg(text, name))
+    store.register(types)
+    return store
+
+
+def load_topic_map(
+    spec: str | os.PathLike | Mapping[str, Any] | None, source: str = "topic map"
+) -> dict[str, TopicField]:
+    """Defaults updated by a mapping (or a YAML/JSON file) ``column: {topic, field[, scale]}``.
+
+    A column mapped to ``null`` is not read. Unknown column names are rejected, since a typo
+    would otherwise silently fall back to the default topic.
+
+    Raises:
+        InputError: naming the file and the column key.
+    """
+    out = dict(DEFAULT_TOPIC_MAP)
+    if spec is None:
+        return out
+    if not isinstance(spec, Mapping):
+        source = str(spec)
+        import yaml
+
+        try:
+            with open(spec, encoding="utf-8") as f:
+                spec = yaml.safe_load(f)
+        except FileNotFoundError:
+            raise InputError(source, "file", "does not exist") from None
+        except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
+            msg = " ".join(str(err).split())
+            raise InputError(source, "file", f"cannot parse as YAML ({msg})") from None
+        if spec is None:
+            return out
+    if not isinstance(spec, Mapping):
+        raise InputError(source, "file", "expected a mapping column -> {topic, field}")
+    known = (*INPUTS, *CHANNELS)
+    for key, value in spec.items():
+        if key not in known:
+            raise InputError(source, str(key), f"unknown column; expected one of {list(known)}")
+        if value is None:
+            out.pop(key, None)
+            continue
+        if not isinstance(value, Mapping) or not isinstance(value.get("topic"), str):
+            expected = "expected {topic: str, field: str, scale: number}"
+            raise InputError(source, key, f"{expected}, got {value!r}")
+        field = value.get("field", "data")
+        if not isinstance(field, str) or not _FIELD_RE.match(field):
+            raise InputError(source, key, f"field {field!r} is not a dotted path like 'twist.linear.x'")
+        scale = value.get("scale", 1.0)
+        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not np.isfinite(scale):
+            raise InputError(source, key, f"scale must be a finite number, got {scale!r}")
+        out[key] = TopicField(value["topic"], field, float(scale))
+    return out
+
+
+def _get(msg: Any, path: str) -> float:
+    obj = msg
+    for part in path.split("."):
+        m = re.match(r"^(\w+)(?:\[(\d+)\])?$", part)
+        assert m is not None
+        obj = getattr(obj, m.group(1))
+        if m.group(2) is not None:
+            obj = obj[int(m.group(2))]
+    return float(obj)
+
+
+def is_bag(path: str | os.PathLike) -> bool:
+    p = Path(path)
+    return (p.is_dir() and (p / "metadata.yaml").exists()) or p.suffix in (".db3", ".mcap")
+
+
+def read_bag_columns(
+    path: str | os.PathLike, topic_map: Mapping[str, TopicField], *, rate: float
+) -> dict[str, np.ndarray]:
+    """Read mapped fields and interpolate them onto a common uniform grid at `rate`.
+
+    Message times are the bag's receive (log) time stamps. The grid spans the interval all
+    mapped topics cover.
+    """
+    from rosbags.highlevel import AnyReader
+
+    source = str(path)
+    series: dict[str, tuple[list[int], list[float]]] = {}
+    try:
+        with AnyReader([Path(path)], default_typestore=autoware_typestore()) as reader:
+            topics = {c.topic: c for c in reader.connections}
+            wanted: dict[str, list[tuple[str, TopicField]]] = {}
+            for col in (*INPUTS, *CHANNELS):
+                spec = topic_map.get(col)
+                if spec is None:
+                    continue
+                if spec.topic not in topics:
+                    if col in INPUTS:
+                        have = ", ".join(sorted(topics)) or "none"
+                        raise InputError(
+                            source,
+                            col,
+                            f"topic '{spec.topic}' not in bag (topics: {have}); map it with --topic-map",
+                        )
+                    continue  # a measured channel may be absent
+                wanted.setdefault(spec.topic, []).append((col, spec))
+                series[col] = ([], [])
+            conns = [topics[tp] for tp in wanted]
+            for conn, stamp, raw in reader.messages(connections=conns):
+                msg = reader.deserialize(raw, conn.msgtype)
+                for col, spec in wanted[conn.topic]:
+                    try:
+                        value = _get(msg, spec.field) * spec.scale
+                    except (AttributeError, IndexError, TypeError, ValueError):
+                        raise InputError(
+                            source,
+                            col,
+                            f"topic '{spec.topic}' ({conn.msgtype}) has no numeric field '{spec.field}'",
+                        ) from None
+                    series[col][0].append(stamp)
+                    series[col][1].append(value)
+    except InputError:
+        raise
+    except Exception as err:  # rosbags, sqlite3, mcap and struct errors on corrupt files
+        msg = " ".join(str(err).split()) or type(err).__name__
+        raise InputError(
+            source, "bag", f"cannot read ROS2 bag ({type(err).__name__}: {msg}); truncated or corrupt?"
+        ) from None
+    present = {c: s for c, s in series.items() if len(s[0]) > 0}
+    for col in INPUTS:
+        if col not in present:
+            raise InputError(source, col, f"topic '{topic_map[col].topic}' has no messages")
+    t0 = max(min(s[0]) for s in present.values()) * 1e-9
+    t1 = min(max(s[0]) for s in present.values()) * 1e-9
+    if not t1 > t0:
+        raise InputError(source, "t", "the mapped topics do not overlap in time")
+    grid = t0 + np.arange(int(np.floor((t1 - t0) * rate + 1e-9)) + 1) / rate
+    out: dict[str, np.ndarray] = {"t": grid - grid[0]}
+    for col, (stamps, values) in present.items():
+        ts = np.asarray(stamps, dtype=np.int64)
+        order = np.argsort(ts, kind="stable")
+        ts, vs = ts[order] * 1e-9, np.asarray(values, dtype=float)[order]
+        keep = np.r_[True, np.diff(ts) > 0]  # a repeated stamp keeps its first message
+        ts, vs = ts[keep], vs[keep]
+        inside = (ts >= t0 - MAX_TOPIC_GAP) & (ts <= t1 + MAX_TOPIC_GAP)
+        gaps = np.diff(ts[inside])
+        if gaps.size and gaps.max() > MAX_TOPIC_GAP:
+            i = int(np.argmax(gaps))
+            raise InputError(
+                source,
+                col,
+                f"topic '{topic_map[col].topic}' has a {gaps[i]:.3g} s gap at t = "
+                f"{ts[inside][i] - t0:.3f} s; expected messages at least every {MAX_TOPIC_GAP:g} s",
+            )
+        out[col] = np.interp(grid, ts, vs)
+    return out
+
+
+def read_bag(
+    path: str | os.PathLike,
+    *,
+    rate: float = 200.0,
+    topic_map: str | os.PathLike | Mapping[str, Any] | None = None,
+) -> Recording:
+    """Read a ROS2 bag (directory with metadata.yaml, or a .db3/.mcap file) into a Recording."""
+    tm = load_topic_map(topic_map)
+    columns = read_bag_columns(path, tm, rate=rate)
+    return build_recording(columns, path, rate=rate)
