@@ -7,6 +7,7 @@ from ._bag import (
     autoware_typestore as autoware_typestore,
     load_topic_map as load_topic_map,
     read_bag as read_bag,
+    write_bag as write_bag,
 )
 from ._csv import read_csv as read_csv
 from ._drive import (

@@ -37,11 +37,17 @@ class TopicField:
         topic: ROS topic name.
         field: dotted path into the message, with optional list index (``"data[1]"``).
         scale: factor to SI units (e.g. 0.10472 for rpm -> rad/s).
+        origin: the topic-map file that set it ("" for the defaults), named in errors.
     """
 
     topic: str
     field: str
     scale: float = 1.0
+    origin: str = ""
+
+    def describe(self) -> str:
+        where = f" (from topic map {self.origin})" if self.origin else ""
+        return f"topic '{self.topic}'{where}"
 
 
 #: Autoware defaults for IMU, speed and steering; vdsbi's own defaults for the rest
@@ -123,7 +129,7 @@ def load_topic_map(
         scale = value.get("scale", 1.0)
         if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not np.isfinite(scale):
             raise InputError(source, key, f"scale must be a finite number, got {scale!r}")
-        out[key] = TopicField(value["topic"], field, float(scale))
+        out[key] = TopicField(value["topic"], field, float(scale), origin=source)
     return out
 
 
@@ -164,12 +170,12 @@ def read_bag_columns(
                 if spec is None:
                     continue
                 if spec.topic not in topics:
-                    if col in INPUTS:
+                    if col in INPUTS or spec.origin:  # required, or asked for explicitly
                         have = ", ".join(sorted(topics)) or "none"
                         raise InputError(
                             source,
                             col,
-                            f"topic '{spec.topic}' not in bag (topics: {have}); map it with --topic-map",
+                            f"{spec.describe()} not in bag (topics: {have}); map it with --topic-map",
                         )
                     continue  # a measured channel may be absent
                 wanted.setdefault(spec.topic, []).append((col, spec))
@@ -184,7 +190,7 @@ def read_bag_columns(
                         raise InputError(
                             source,
                             col,
-                            f"topic '{spec.topic}' ({conn.msgtype}) has no numeric field '{spec.field}'",
+                            f"{spec.describe()} ({conn.msgtype}) has no numeric field '{spec.field}'",
                         ) from None
                     series[col][0].append(stamp)
                     series[col][1].append(value)
@@ -198,7 +204,7 @@ def read_bag_columns(
     present = {c: s for c, s in series.items() if len(s[0]) > 0}
     for col in INPUTS:
         if col not in present:
-            raise InputError(source, col, f"topic '{topic_map[col].topic}' has no messages")
+            raise InputError(source, col, f"{topic_map[col].describe()} has no messages")
     t0 = max(min(s[0]) for s in present.values()) * 1e-9
     t1 = min(max(s[0]) for s in present.values()) * 1e-9
     if not t1 > t0:
@@ -218,7 +224,7 @@ def read_bag_columns(
             raise InputError(
                 source,
                 col,
-                f"topic '{topic_map[col].topic}' has a {gaps[i]:.3g} s gap at t = "
+                f"{topic_map[col].describe()} has a {gaps[i]:.3g} s gap at t = "
                 f"{ts[inside][i] - t0:.3f} s; expected messages at least every {MAX_TOPIC_GAP:g} s",
             )
         out[col] = np.interp(grid, ts, vs)
@@ -235,3 +241,95 @@ def read_bag(
     tm = load_topic_map(topic_map)
     columns = read_bag_columns(path, tm, rate=rate)
     return build_recording(columns, path, rate=rate)
+
+
+def write_bag(
+    rec: Recording,
+    path: str | os.PathLike,
+    *,
+    storage: str = "sqlite3",
+    start_ns: int = 1_700_000_000 * 10**9,
+    skip: tuple[str, ...] = (),
+) -> None:
+    """Write a Recording as a ROS2 bag with the default topic map (for tests and demos).
+
+    IMU (sensor_msgs/Imu), VelocityReport and SteeringReport (Autoware), one std_msgs/Float64
+    per axle torque and a std_msgs/Float64MultiArray [front, rear] of wheel speeds; one message
+    per sample per topic, log time = header time = `start_ns` + t.
+
+    Args:
+        rec: the recording.
+        path: bag directory to create (must not exist).
+        storage: "sqlite3" or "mcap".
+        skip: topics to leave out.
+    """
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    store = autoware_typestore()
+    ns = store.types
+    Time = store.types["builtin_interfaces/msg/Time"]
+    Header = store.types["std_msgs/msg/Header"]
+    Vector3 = store.types["geometry_msgs/msg/Vector3"]
+    Quaternion = store.types["geometry_msgs/msg/Quaternion"]
+    ch = rec.channels
+    zero = np.zeros(rec.num_samples)
+    cov = np.zeros(9)
+    plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
+
+    def stamp(k: int):
+        total = start_ns + int(round(float(rec.t[k] - rec.t[0]) * 1e9))
+        return total, Time(sec=total // 10**9, nanosec=total % 10**9)
+
+    topics = {
+        "/sensing/imu/imu_data": "sensor_msgs/msg/Imu",
+        "/vehicle/status/velocity_status": "autoware_vehicle_msgs/msg/VelocityReport",
+        "/vehicle/status/steering_status": "autoware_vehicle_msgs/msg/SteeringReport",
+        "/vdsbi/torque_front": "std_msgs/msg/Float64",
+        "/vdsbi/torque_rear": "std_msgs/msg/Float64",
+        "/vdsbi/wheel_speeds": "std_msgs/msg/Float64MultiArray",
+    }
+    if "vx" not in ch:
+        skip = (*skip, "/vehicle/status/velocity_status")
+    if "omega_front" not in ch or "omega_rear" not in ch:
+        skip = (*skip, "/vdsbi/wheel_speeds")
+    layout = ns["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
+    with Writer(path, version=9, storage_plugin=plugin) as writer:
+        conns = {
+            tp: writer.add_connection(tp, ty, typestore=store) for tp, ty in topics.items() if tp not in skip
+        }
+        for k in range(rec.num_samples):
+            total, tm = stamp(k)
+            hdr = Header(stamp=tm, frame_id="base_link")
+            msgs = {
+                "/sensing/imu/imu_data": ns["sensor_msgs/msg/Imu"](
+                    header=hdr,
+                    orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
+                    orientation_covariance=cov,
+                    angular_velocity=Vector3(x=0.0, y=0.0, z=float(ch.get("yaw_rate", zero)[k])),
+                    angular_velocity_covariance=cov,
+                    linear_acceleration=Vector3(
+                        x=float(ch.get("ax", zero)[k]), y=float(ch.get("ay", zero)[k]), z=9.81
+                    ),
+                    linear_acceleration_covariance=cov,
+                ),
+                "/vdsbi/torque_front": ns["std_msgs/msg/Float64"](data=float(rec.torque_front[k])),
+                "/vdsbi/torque_rear": ns["std_msgs/msg/Float64"](data=float(rec.torque_rear[k])),
+                "/vehicle/status/steering_status": ns["autoware_vehicle_msgs/msg/SteeringReport"](
+                    stamp=tm, steering_tire_angle=float(rec.steer[k])
+                ),
+            }
+            if "/vehicle/status/velocity_status" in conns:
+                msgs["/vehicle/status/velocity_status"] = ns["autoware_vehicle_msgs/msg/VelocityReport"](
+                    header=hdr,
+                    longitudinal_velocity=float(ch["vx"][k]),
+                    lateral_velocity=0.0,
+                    heading_rate=0.0,
+                )
+            if "/vdsbi/wheel_speeds" in conns:
+                msgs["/vdsbi/wheel_speeds"] = ns["std_msgs/msg/Float64MultiArray"](
+                    layout=layout,
+                    data=np.array([ch["omega_front"][k], ch["omega_rear"][k]], dtype=np.float64),
+                )
+            for tp, msg in msgs.items():
+                if tp in conns:
+                    writer.write(conns[tp], total, store.serialize_cdr(msg, conns[tp].msgtype))

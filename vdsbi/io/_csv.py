@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 
 from ._errors import InputError
-from ._recording import Recording, build_recording
+from ._recording import Recording, _is_number, build_recording
 
 
 def read_csv_columns(path: str | os.PathLike) -> dict[str, np.ndarray]:
@@ -28,6 +28,10 @@ def read_csv_columns(path: str | os.PathLike) -> dict[str, np.ndarray]:
         raise InputError(source, "header", "file is empty; expected a header row t,steer,torque_front,...")
     header = next(csv.reader([first]))
     names = [h.strip() for h in header]
+    if all(_is_number(c) for c in names):
+        raise InputError(
+            source, "header", "the first row holds numbers; expected a header row t,steer,torque_front,..."
+        )
     dup = sorted({c for c in names if names.count(c) > 1 and c})
     if dup:
         raise InputError(source, dup[0], "duplicated column; expected each column once")

@@ -195,6 +195,10 @@ def build_recording(
     """
     source = str(source)
     found = [str(c) for c in columns]
+    if found and all(_is_number(c) for c in found):
+        raise InputError(
+            source, "header", "the first row holds numbers; expected a header row t,steer,torque_front,..."
+        )
     dup = sorted({c for c in found if found.count(c) > 1})
     if dup:
         raise InputError(source, dup[0], "duplicated column; expected each column once")
@@ -303,7 +307,7 @@ def build_recording(
 
 
 #: Running-mean window, s, for the kinematic consistency checks below.
-_KIN_WINDOW = 1.0
+_KIN_WINDOW = 0.5
 
 
 def _running_mean(x: np.ndarray, n: int) -> np.ndarray:
@@ -312,7 +316,7 @@ def _running_mean(x: np.ndarray, n: int) -> np.ndarray:
 
 
 def kinematic_slopes(rec: Recording, min_speed: float = 3.0) -> dict[str, float]:
-    """Least-squares slopes of two kinematic identities, after a 1-s running mean.
+    """Least-squares slopes of two kinematic identities, after a 0.5-s running mean.
 
     - "dvx/dt~ax": d(vx)/dt against ax (1 for consistent units and time base; 3.6 if vx is in
       km/h; 1/k if the time stamps are stretched k-fold).
@@ -328,7 +332,8 @@ def kinematic_slopes(rec: Recording, min_speed: float = 3.0) -> dict[str, float]
     n = max(1, int(round(_KIN_WINDOW * rec.rate)))
     vx = _running_mean(ch["vx"], n)
     moving = vx > min_speed
-    if moving.sum() < 2 * n:
+    moving[: n // 2 + 1] = moving[-(n // 2 + 1) :] = False  # edges of the running mean are biased
+    if moving.sum() < n:
         return {}
     out = {}
     if "ax" in ch:
