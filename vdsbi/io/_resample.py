@@ -23,7 +23,9 @@ def check_uniform(t: np.ndarray, source: str) -> float:
         InputError: naming `source` and field `t` on an irregular grid or an implausible rate.
     """
     n = t.shape[0]
-    dt = (t[-1] - t[0]) / (n - 1)
+    k = np.arange(n)
+    dt, t0 = np.polyfit(k, t - t[0], 1)  # least-squares grid, so jitter at the ends does not tilt it
+    t0 += t[0]
     if not 1.0 / dt >= MIN_RATE:
         raise InputError(
             source,
@@ -31,8 +33,7 @@ def check_uniform(t: np.ndarray, source: str) -> float:
             f"sample rate {1.0 / dt:.3g} Hz is below {MIN_RATE:g} Hz; expected t in seconds "
             "(is it in milliseconds or nanoseconds?)",
         )
-    grid = t[0] + dt * np.arange(n)
-    resid = np.abs(t - grid)
+    resid = np.abs(t - (t0 + dt * k))
     tol = max(GRID_RTOL * dt, min(GRID_ATOL, 0.25 * dt)) + 1e-9 * max(1.0, abs(t[-1]))
     k = int(np.argmax(resid))
     if resid[k] > tol:
@@ -51,8 +52,9 @@ def check_uniform(t: np.ndarray, source: str) -> float:
 def resample(t: np.ndarray, columns: dict[str, np.ndarray], rate: float) -> tuple[np.ndarray, dict]:
     """Resample uniform series onto t0 + k/rate, k = 0..floor(duration·rate).
 
-    Linear interpolation; when downsampling, each series is first averaged over a moving window
-    one target step long (a box anti-alias filter), so high-rate sensor noise does not alias.
+    The output grid starts at t[0]. Linear interpolation; when downsampling, each series is
+    first averaged over a moving window one target step long (a box anti-alias filter), so
+    high-rate sensor noise does not alias.
 
     Args:
         t: (T,) uniform time stamps, s.
