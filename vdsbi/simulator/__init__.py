@@ -1,6 +1,39 @@
 """Differentiable, batched bicycle-model vehicle simulator (seed eq. 1–13) with physics effects."""
 
+from ._dynamics import Args as Args, VehicleModel as VehicleModel
+from ._effects import (
+    EFFECTS as EFFECTS,
+    AbstractEffect as AbstractEffect,
+    Context as Context,
+    get_effect as get_effect,
+)
 from ._inputs import Inputs as Inputs
+from ._profiles import (
+    constant_profile as constant_profile,
+    random_profile as random_profile,
+    seed_profile as seed_profile,
+)
+from ._sensors import (
+    SEED_RELATIVE_NOISE as SEED_RELATIVE_NOISE,
+    SensorNoise as SensorNoise,
+    StiffnessMixtureNoise as StiffnessMixtureNoise,
+    sensor_noise as sensor_noise,
+)
+from ._solve import (
+    RK4 as RK4,
+    TRACE_COUNT as TRACE_COUNT,
+    Solver as Solver,
+    check_inputs as check_inputs,
+    check_theta as check_theta,
+    effect_params_from as effect_params_from,
+    make_model as make_model,
+    simulate as simulate,
+    solve as solve,
+    solve_batch as solve_batch,
+    theta_valid as theta_valid,
+)
+from ._stochastic import StochasticSimulator as StochasticSimulator
+from ._tire import dugoff as dugoff
 from ._vehicle import (
     CHANNELS as CHANNELS,
     GRAVITY as GRAVITY,
@@ -16,3 +49,13 @@ from ._vehicle import (
     theta_from_dict as theta_from_dict,
     theta_to_dict as theta_to_dict,
 )
+
+#: The seed's Table II true values (stiffness = Table I nominal + Δ·1e5).
+SEED_TRUE_THETA: dict[str, float] = {
+    "l_f": 1.5,
+    "h_cog": 0.415,
+    "C_kappa_f": 1e5 + 0.446e5,
+    "C_kappa_r": 1e5 + 0.407e5,
+    "C_alpha_f": 6e4 + 0.12e5,
+    "C_alpha_r": 6e4 + 0.051e5,
+}

@@ -1,0 +1,213 @@
+"""The seed's bicycle model (eq. 1–13) as a vector field, with composable effects.
+
+Conventions where the seed is ambiguous or wrong (each is also noted where it is used):
+  * states: Vx, Vy, r, ω_f, ω_r, α̂_f, α̂_r, κ̂_f, κ̂_r, then the states of enabled effects;
+  * l_r = L − l_f and I_z = m·l_f·l_r (seed: "approximated by I_z = m·l_r·l_f");
+  * tire forces use the relaxed slips α̂, κ̂ (eq. 13 applied to κ with the same σ_l);
+  * eq. 7 as printed (R_l = F_z/C_vert) is a deflection, not a radius: we use
+    R_l = R_f − F_z/C_vert;
+  * eq. 11's load transfer m·h·a_x/L uses the specific force a_x (tire and other
+    non-gravitational forces / m), solved by fixed-point iteration since a_x depends on the
+    loads through Dugoff's f(λ).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._effects import AbstractEffect, Context
+from ._inputs import Inputs
+from ._tire import dugoff_demand, dugoff_with_load
+from ._vehicle import CHANNELS, GRAVITY, Vehicle
+
+NUM_BASE_STATES = 9
+#: Below this speed slips are regularised (eq. 2–3 are singular at standstill).
+V_FLOOR = 0.5
+#: Fixed-point iterations for the load-transfer/a_x loop (converges in ~2: f(λ) is flat).
+LOAD_ITERATIONS = 3
+
+
+class Args(NamedTuple):
+    theta: Float[Array, "6"]
+    effect_params: tuple
+    inputs: Inputs
+
+
+class VehicleModel(eqx.Module):
+    """Vehicle constants plus the enabled effects (in application order)."""
+
+    vehicle: Vehicle
+    effects: tuple[AbstractEffect, ...] = eqx.field(static=True, default=())
+
+    @property
+    def num_states(self) -> int:
+        return NUM_BASE_STATES + sum(e.num_states for e in self.effects)
+
+    def _effect_states(self, y):
+        out, i = [], NUM_BASE_STATES
+        for e in self.effects:
+            out.append(y[i : i + e.num_states])
+            i += e.num_states
+        return out
+
+    def radius(self, effect_params) -> Float[Array, ""]:
+        scale = jnp.asarray(1.0)
+        for e, p in zip(self.effects, effect_params):
+            scale = scale * e.radius_scale(p)
+        return self.vehicle.wheel_radius * scale
+
+    def static_loads(self, theta):
+        L, m = self.vehicle.wheelbase, self.vehicle.mass
+        l_f = theta[0]
+        return m * GRAVITY * (L - l_f) / L, m * GRAVITY * l_f / L
+
+    def effective_radius(self, r_free, fz):
+        # Eq. 6 with R_l = R_f − F_z/C_vert: R_eff = R_f − F_z/(3·C_vert).
+        return r_free - fz / (3.0 * self.vehicle.tire_vertical_stiffness)
+
+    def initial_state(self, theta, effect_params, inputs: Inputs, v0) -> Float[Array, " S"]:
+        """Vx = v0, Vy = r = 0, ω = v0/R_eff at static load, slips 0, effect states at rest."""
+        r_free = self.radius(effect_params)
+        fzf, fzr = self.static_loads(theta)
+        v0 = jnp.asarray(v0, dtype=float)
+        base = jnp.stack(
+            [
+                v0,
+                jnp.zeros_like(v0),
+                jnp.zeros_like(v0),
+                v0 / self.effective_radius(r_free, fzf),
+                v0 / self.effective_radius(r_free, fzr),
+            ]
+            + [jnp.zeros_like(v0)] * 4
+        )
+        u0 = inputs(inputs.t0)
+        extra = [e.init_state(p, u0) for e, p in zip(self.effects, effect_params)]
+        return jnp.concatenate([base, *extra]) if extra else base
+
+    def evaluate(self, t, y, args: Args):
+        """Returns (dy/dt, sensor readings {channel: value})."""
+        theta, effect_params, inputs = args
+        veh = self.vehicle
+        m, L, mu = veh.mass, veh.wheelbase, veh.friction
+        vx, vy, r, wf, wr, a_f_hat, a_r_hat, k_f_hat, k_r_hat = (y[i] for i in range(9))
+        zs = self._effect_states(y)
+        u_cmd = inputs(t)
+        u = u_cmd
+        for e, p, z in zip(self.effects, effect_params, zs):
+            u = e.inputs(p, z, u)
+        delta, torque_f, torque_r = u[0], u[1], u[2]
+        l_f, h, ckf, ckr, caf, car = (theta[i] for i in range(6))
+        l_r = L - l_f
+        i_z = m * l_f * l_r
+        r_free = self.radius(effect_params)
+        fz_f0, fz_r0 = self.static_loads(theta)
+        zero = jnp.zeros_like(vx)
+
+        def context(fz_f, fz_r, r_dot):
+            return Context(
+                vx=vx,
+                vy=vy,
+                r=r,
+                r_dot=r_dot,
+                fz_front=fz_f,
+                fz_rear=fz_r,
+                r_eff_front=self.effective_radius(r_free, fz_f),
+                r_eff_rear=self.effective_radius(r_free, fz_r),
+                omega_front=wf,
+                omega_rear=wr,
+                mass=jnp.asarray(m),
+                gravity=GRAVITY,
+            )
+
+        ctx0 = context(fz_f0, fz_r0, zero)
+        fbx, fby, gx, gy = zero, zero, zero, zero
+        for e, p in zip(self.effects, effect_params):
+            bx, by = e.body_force(p, ctx0)
+            ax_g, ay_g = e.gravity_accel(p, ctx0)
+            fbx, fby, gx, gy = fbx + bx, fby + by, gx + ax_g, gy + ay_g
+
+        cos_d, sin_d = jnp.cos(delta), jnp.sin(delta)
+
+        demand_f = dugoff_demand(ckf, caf, k_f_hat, a_f_hat)
+        demand_r = dugoff_demand(ckr, car, k_r_hat, a_r_hat)
+
+        def tire_forces(a_x):
+            # Eq. 11 with the specific force a_x (the seed's ± sign: load moves rearwards
+            # under acceleration).
+            fz_f = fz_f0 - m * h * a_x / L
+            fz_r = fz_r0 + m * h * a_x / L
+            fx_f, fy_f = dugoff_with_load(demand_f, fz_f, mu)
+            fx_r, fy_r = dugoff_with_load(demand_r, fz_r, mu)
+            a_x_new = (fx_f * cos_d - fy_f * sin_d + fx_r + fbx) / m
+            return a_x_new, (fz_f, fz_r, fx_f, fy_f, fx_r, fy_r)
+
+        a_x = zero
+        for _ in range(LOAD_ITERATIONS):
+            a_x, forces = tire_forces(a_x)
+        fz_f, fz_r, fx_f, fy_f, fx_r, fy_r = forces
+        a_x = (fx_f * cos_d - fy_f * sin_d + fx_r + fbx) / m
+        a_y = (fx_f * sin_d + fy_f * cos_d + fy_r + fby) / m
+
+        # Eq. 2, 4, 5: slip angles from contact-patch velocities; Vx floored at V_FLOOR
+        # because eq. 2–3 are singular at standstill.
+        vx_pos = jnp.maximum(vx, V_FLOOR)
+        alpha_f = delta - jnp.arctan((vy + l_f * r) / vx_pos)
+        alpha_r = -jnp.arctan((vy - l_r * r) / vx_pos)
+        # Eq. 3, each wheel's longitudinal speed taken as Vx (seed: V_xf = V_xr = V_x).
+        ctx = context(fz_f, fz_r, zero)
+        rw_f = ctx.r_eff_front * wf
+        rw_r = ctx.r_eff_rear * wr
+        kappa_f = (rw_f - vx) / jnp.maximum(jnp.maximum(rw_f, vx), V_FLOOR)
+        kappa_r = (rw_r - vx) / jnp.maximum(jnp.maximum(rw_r, vx), V_FLOOR)
+        # Eq. 13 for α̂ and, by the seed's analogy, κ̂ with the same σ_l.
+        rate = jnp.maximum(vx, 0.0) / veh.relaxation_length
+
+        tq_f, tq_r = torque_f, torque_r
+        for e, p in zip(self.effects, effect_params):
+            ef, er = e.wheel_torque(p, ctx)
+            tq_f, tq_r = tq_f + ef, tq_r + er
+        # Eq. 12 per axle: I_w·ω̇ = T − F_x·R_eff, T the axle's total torque input.
+        dwf = (tq_f - fx_f * ctx.r_eff_front) / veh.wheel_inertia
+        dwr = (tq_r - fx_r * ctx.r_eff_rear) / veh.wheel_inertia
+        # Eq. 1 in body axes; gravity components of grade/bank add to the motion only.
+        dvx = a_x + gx + vy * r
+        dvy = a_y + gy - vx * r
+        dr = (l_f * (fx_f * sin_d + fy_f * cos_d) - l_r * fy_r) / i_z
+        d_base = jnp.stack(
+            [
+                dvx,
+                dvy,
+                dr,
+                dwf,
+                dwr,
+                rate * (alpha_f - a_f_hat),
+                rate * (alpha_r - a_r_hat),
+                rate * (kappa_f - k_f_hat),
+                rate * (kappa_r - k_r_hat),
+            ]
+        )
+        d_extra = [e.state_rhs(p, z, u_cmd) for e, p, z in zip(self.effects, effect_params, zs)]
+        dy = jnp.concatenate([d_base, *d_extra]) if d_extra else d_base
+
+        readings = {
+            "ax": a_x,
+            "ay": a_y,
+            "yaw_rate": r,
+            "omega_front": wf,
+            "omega_rear": wr,
+            "vx": vx,
+        }
+        ctx = ctx._replace(r_dot=dr)
+        for e, p in zip(self.effects, effect_params):
+            readings = e.measure(p, readings, ctx)
+        return dy, jnp.stack([readings[c] for c in CHANNELS])
+
+    def vector_field(self, t, y, args: Args):
+        return self.evaluate(t, y, args)[0]
+
+    def sensors(self, t, y, args: Args):
+        return self.evaluate(t, y, args)[1]

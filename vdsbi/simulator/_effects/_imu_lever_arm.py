@@ -1,0 +1,19 @@
+from ._base import AbstractEffect
+
+
+class ImuLeverArm(AbstractEffect):
+    """IMU mounted at (dx, dy) from the CoG: a_imu = a_cog + ṙ×d − r²·d (planar rigid body)."""
+
+    name = "imu_lever_arm"
+    param_names = ("dx", "dy")
+    units = ("m", "m")
+    null = (0.0, 0.0)
+    typical = ((-1.0, 1.0), (-0.4, 0.4))
+    description = "IMU away from the CoG (ay gains dx·ṙ, ax gains −dy·ṙ, centripetal −r²·d)"
+
+    def measure(self, p, y, ctx):
+        dx, dy = p[0], p[1]
+        y = dict(y)
+        y["ax"] = y["ax"] - ctx.r_dot * dy - ctx.r**2 * dx
+        y["ay"] = y["ay"] + ctx.r_dot * dx - ctx.r**2 * dy
+        return y

@@ -1,0 +1,17 @@
+import jax.numpy as jnp
+
+from ._base import AbstractEffect
+
+
+class RoadBank(AbstractEffect):
+    """Constant road bank φ_b (> 0: left side high): −g·sin φ_b along body y, not felt."""
+
+    name = "road_bank"
+    param_names = ("bank",)
+    units = ("rad",)
+    null = (0.0,)
+    typical = ((-0.06, 0.06),)
+    description = "road bank (gravity along y, balanced by tire side force: ay offset with drift)"
+
+    def gravity_accel(self, p, ctx):
+        return jnp.asarray(0.0), -ctx.gravity * jnp.sin(p[0])

@@ -1,0 +1,17 @@
+import jax.numpy as jnp
+
+from ._base import AbstractEffect
+
+
+class RoadGrade(AbstractEffect):
+    """Constant road grade θ_g (> 0 uphill): −g·sin θ_g along body x, not felt by the IMU."""
+
+    name = "road_grade"
+    param_names = ("grade",)
+    units = ("rad",)
+    null = (0.0,)
+    typical = ((-0.06, 0.06),)
+    description = "road grade (gravity along x: speed changes the accelerometer does not see)"
+
+    def gravity_accel(self, p, ctx):
+        return -ctx.gravity * jnp.sin(p[0]), jnp.asarray(0.0)
