@@ -159,7 +159,9 @@ def solve(
     else:
         substeps = max(1, round(inputs.dt / solver.dt))
         h = inputs.dt / substeps
-        rk4 = RK4()
+        # scan_kind='lax': diffrax's default checkpointed stage loop is a custom_vjp, which
+        # forbids forward-mode autodiff (jax.jacfwd); the plain scan allows both modes.
+        rk4 = RK4(scan_kind="lax")
         state0 = rk4.init(term, inputs.t0, inputs.t0 + h, y0, args)
 
         def sample_interval(carry, k):
