@@ -1,5 +1,6 @@
 """Diagnostics for posterior estimates."""
 
+from ._c2st import c2st as c2st
 from ._fisher import (
     Fisher as Fisher,
     FitResult as FitResult,

@@ -1,0 +1,73 @@
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from vdsbi.inference import (
+    BoxPrior,
+    ConditionalFlow,
+    IdentityEmbedding,
+    MLPEmbedding,
+    Posterior,
+    Standardizer,
+)
+
+
+def _perturbed(flow, key, scale):
+    """Perturb the trainable weights so the density is far from the initial near-identity flow."""
+    params, static = eqx.partition(flow.layers, eqx.is_inexact_array)
+    leaves, tree = jax.tree.flatten(params)
+    keys = jax.random.split(key, len(leaves))
+    leaves = [leaf + scale * jax.random.normal(k, leaf.shape) for leaf, k in zip(leaves, keys)]
+    return eqx.tree_at(lambda f: f.layers, flow, eqx.combine(jax.tree.unflatten(tree, leaves), static))
+
+
+def test_flow_density_integrates_to_one(getkey):
+    prior = BoxPrior(jnp.array([-1.0, 0.0]), jnp.array([2.0, 1.5]))
+    flow = ConditionalFlow(getkey(), prior, IdentityEmbedding(1), (1,), num_layers=3, num_bins=6, hidden=16)
+    flow = _perturbed(flow, getkey(), 0.1)
+    n = 600
+    g0 = jnp.linspace(-1.0, 2.0, n + 1)
+    g1 = jnp.linspace(0.0, 1.5, n + 1)
+    c0, c1 = 0.5 * (g0[1:] + g0[:-1]), 0.5 * (g1[1:] + g1[:-1])
+    grid = jnp.stack(jnp.meshgrid(c0, c1, indexing="ij"), -1).reshape(-1, 2)
+    cell = (3.0 / n) * (1.5 / n)
+    for x in (jnp.array([0.3]), jnp.array([-2.0])):
+        lp = Posterior(flow, x).log_prob(grid)
+        total = float(jnp.sum(jnp.exp(lp)) * cell)
+        assert abs(total - 1.0) < 5e-3, total
+        # and it is not the uniform density: the test would be vacuous otherwise
+        assert float(jnp.std(jnp.exp(lp))) > 0.05
+
+
+def test_samples_never_leave_prior_box(getkey):
+    prior = BoxPrior(jnp.array([-1.0, 5.0, 0.0]), jnp.array([1.0, 5.001, 100.0]))
+    flow = ConditionalFlow(getkey(), prior, IdentityEmbedding(2), (2,), num_layers=2, num_bins=4, hidden=8)
+    flow = _perturbed(flow, getkey(), 3.0)  # wild weights push mass against the box edges
+    post = Posterior(flow, jnp.array([50.0, -50.0]))
+    s = np.asarray(post.sample(getkey(), 20_000))
+    u = (s - np.asarray(prior.low)) / np.asarray(prior.high - prior.low)
+    assert np.mean((u < 1e-3) | (u > 1 - 1e-3)) > 0.1  # the test really probes the edges
+    assert np.all(s >= np.asarray(prior.low)) and np.all(s <= np.asarray(prior.high))
+    # strictly inside where float32 can resolve it (dims 0 and 2)
+    assert np.all(s[:, [0, 2]] > np.asarray(prior.low)[[0, 2]])
+    assert np.all(s[:, [0, 2]] < np.asarray(prior.high)[[0, 2]])
+    assert np.all(np.isfinite(np.asarray(post.log_prob(s))))
+    # log_prob is -inf outside the box
+    out = jnp.array([[1.5, 5.0005, 50.0], [0.0, 4.9, 50.0]])
+    assert np.all(np.isneginf(np.asarray(post.log_prob(out))))
+
+
+def test_flow_with_time_channel_inputs(getkey):
+    # x of shape (T, C) standardised per channel, embedded by an MLP
+    t, c = 20, 3
+    xs = jax.random.normal(getkey(), (64, t, c)) * jnp.array([1.0, 10.0, 100.0]) + 5.0
+    std = Standardizer.fit(xs, "channel")
+    assert std.mean.shape == (c,)
+    np.testing.assert_allclose(np.asarray(jax.vmap(std)(xs)).reshape(-1, c).std(0), 1.0, rtol=1e-4)
+    assert Standardizer.fit(xs, "global").mean.shape == ()
+    prior = BoxPrior(jnp.zeros(2), jnp.ones(2))
+    emb = MLPEmbedding(getkey(), t * c, 8, 16, 1)
+    flow = ConditionalFlow(getkey(), prior, emb, (t, c), num_layers=2, hidden=8, x_standardizer=std)
+    lp = jax.vmap(flow.log_prob)(jnp.full((64, 2), 0.5), xs)
+    assert lp.shape == (64,) and np.all(np.isfinite(np.asarray(lp)))

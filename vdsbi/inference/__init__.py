@@ -1,0 +1,56 @@
+"""Neural posterior estimation in JAX: spline flows, NPE and APT / SNPE-C."""
+
+from ._apt import (
+    APTState as APTState,
+    NPEConfig as NPEConfig,
+    TrainConfig as TrainConfig,
+    apt as apt,
+    build_flow as build_flow,
+    load_state as load_state,
+    save_state as save_state,
+)
+from ._cnn import CNNEmbedding as CNNEmbedding
+from ._embeddings import (
+    AbstractEmbedding as AbstractEmbedding,
+    IdentityEmbedding as IdentityEmbedding,
+    MLPEmbedding as MLPEmbedding,
+    embedding_from_spec as embedding_from_spec,
+    register_embedding as register_embedding,
+)
+from ._flow import (
+    ConditionalFlow as ConditionalFlow,
+    flow_from_spec as flow_from_spec,
+    trainable_filter as trainable_filter,
+)
+from ._loss import (
+    AbstractLoss as AbstractLoss,
+    AtomicLoss as AtomicLoss,
+    MaximumLikelihoodLoss as MaximumLikelihoodLoss,
+    atom_indices as atom_indices,
+    atomic_apt_loss as atomic_apt_loss,
+)
+from ._posterior import Posterior as Posterior
+from ._prior import BoxPrior as BoxPrior
+from ._sharding import data_mesh as data_mesh, replicate as replicate, shard_batch as shard_batch
+from ._spline import (
+    num_spline_params as num_spline_params,
+    rq_spline_forward as rq_spline_forward,
+    rq_spline_inverse as rq_spline_inverse,
+)
+from ._standardize import Standardizer as Standardizer
+from ._summaries import DEFAULT_LAGS as DEFAULT_LAGS, summary_statistics as summary_statistics
+from ._train import (
+    TRACE_COUNTS as TRACE_COUNTS,
+    eval_loss as eval_loss,
+    fit as fit,
+    init_opt_state as init_opt_state,
+    make_optimizer as make_optimizer,
+    train_step as train_step,
+)
+from ._vehicle import (
+    IdentifySettings as IdentifySettings,
+    identify as identify,
+    make_embedding as make_embedding,
+    observation as observation,
+    seed_prior as seed_prior,
+)

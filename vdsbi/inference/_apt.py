@@ -1,0 +1,333 @@
+"""Sequential neural posterior estimation: NPE (round 1) and APT / SNPE-C (later rounds)."""
+
+import dataclasses
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, PRNGKeyArray
+
+from ._embeddings import AbstractEmbedding
+from ._flow import ConditionalFlow
+from ._loss import AtomicLoss, MaximumLikelihoodLoss
+from ._posterior import Posterior, _log_prob, _sample
+from ._prior import BoxPrior
+from ._serialise import FORMAT_VERSION, flow_from_bytes, flow_to_bytes, read_npz, write_npz
+from ._sharding import data_mesh
+from ._standardize import Standardizer
+from ._train import fit
+
+
+@dataclasses.dataclass(frozen=True)
+class NPEConfig:
+    """Architecture and training hyperparameters (defaults follow ``sbi``'s NSF/SNPE-C).
+
+    Attributes:
+        num_layers: coupling layers (each followed by a learned LU-linear layer if ``use_lu``).
+        num_bins: rational-quadratic spline bins.
+        hidden: width of the residual conditioner networks.
+        num_blocks: residual blocks per conditioner.
+        tail_bound: spline interval ``[-B, B]`` on the standardised logit scale; identity outside.
+        use_lu: learned LU-linear layer after each coupling layer.
+        batch_size: training batch size (rounded down to a multiple of the device count).
+        learning_rate, weight_decay: AdamW.
+        clip_norm: global-norm gradient clipping.
+        max_epochs, patience: early stopping on validation loss; best weights are restored.
+        validation_fraction: fraction of each round's simulations held out for validation.
+        num_atoms: atoms per example in the APT loss (rounds > 1).
+        combined_loss: add maximum likelihood on prior draws to the atomic loss.
+        x_standardize: ``"channel"`` (statistics over all axes but the last), ``"global"`` or ``"none"``.
+        truncation_epsilon: mass outside the HPD region for ``truncate=True`` (TSNPE).
+        truncation_samples: posterior samples used to locate the HPD threshold.
+        retrain_from_scratch: re-initialise the flow every round (default: continue training).
+    """
+
+    num_layers: int = 5
+    num_bins: int = 10
+    hidden: int = 50
+    num_blocks: int = 2
+    tail_bound: float = 3.0
+    use_lu: bool = True
+    batch_size: int = 128
+    learning_rate: float = 5e-4
+    weight_decay: float = 0.0
+    clip_norm: float = 5.0
+    max_epochs: int = 1000
+    patience: int = 20
+    validation_fraction: float = 0.1
+    num_atoms: int = 10
+    combined_loss: bool = False
+    x_standardize: str = "channel"
+    truncation_epsilon: float = 1e-4
+    truncation_samples: int = 10_000
+    retrain_from_scratch: bool = False
+
+    def __post_init__(self):
+        if self.x_standardize not in ("channel", "global", "none"):
+            raise ValueError(
+                f"x_standardize must be 'channel', 'global' or 'none', got {self.x_standardize!r}"
+            )
+        if not 0.0 < self.validation_fraction < 1.0:
+            raise ValueError("validation_fraction must be in (0, 1)")
+        if self.num_atoms < 2:
+            raise ValueError("num_atoms must be >= 2")
+
+
+TrainConfig = NPEConfig
+
+
+@dataclasses.dataclass(frozen=True)
+class APTState:
+    """Everything needed to resume :func:`apt` exactly after a finished round.
+
+    Attributes:
+        round: number of completed rounds.
+        key: the PRNG key the next round starts from.
+        theta: ``(N, d)`` parameters of all kept (valid, finite) simulations so far.
+        x: ``(N, ...)`` their simulations.
+        round_ids: ``(N,)`` round in which each simulation was made (0 = prior draws).
+        is_val: ``(N,)`` held out for validation (fixed when the simulation is made).
+        flow: the current estimator (None before round 1 finishes).
+        history: one dict per round: simulation counts (incl. ``num_invalid``,
+            ``num_nonfinite``, ``num_used``), proposal, epochs, losses, wall time.
+    """
+
+    round: int
+    key: PRNGKeyArray
+    theta: np.ndarray
+    x: np.ndarray
+    round_ids: np.ndarray
+    is_val: np.ndarray
+    flow: ConditionalFlow | None
+    history: tuple[dict[str, Any], ...] = ()
+
+    @property
+    def num_invalid(self) -> int:
+        """Total simulations discarded (``valid=False`` or non-finite) over all rounds."""
+        return sum(h["num_invalid"] + h["num_nonfinite"] for h in self.history)
+
+
+def save_state(path, state: APTState) -> None:
+    """Write ``state`` to ONE file atomically (temp file + ``os.replace``)."""
+    header = {
+        "kind": "APTState",
+        "version": FORMAT_VERSION,
+        "round": state.round,
+        "history": list(state.history),
+        "flow": None if state.flow is None else state.flow.spec(),
+    }
+    arrays = {
+        "key": np.asarray(jax.random.key_data(state.key)),
+        "theta": state.theta,
+        "x": state.x,
+        "round_ids": state.round_ids,
+        "is_val": state.is_val,
+    }
+    if state.flow is not None:
+        arrays["flow"] = flow_to_bytes(state.flow)
+    write_npz(path, header, arrays)
+
+
+def load_state(path, like: APTState | None = None) -> APTState:
+    """Read a state written by :func:`save_state`.
+
+    ``like`` is accepted for API symmetry; the estimator is rebuilt from the stored spec.
+    """
+    del like
+    header, arrays = read_npz(path)
+    if header.get("kind") != "APTState":
+        raise ValueError(f"{path} does not hold an APTState (kind={header.get('kind')!r})")
+    flow = None if header["flow"] is None else flow_from_bytes(header["flow"], arrays["flow"])
+    return APTState(
+        round=int(header["round"]),
+        key=jax.random.wrap_key_data(jnp.asarray(arrays["key"])),
+        theta=arrays["theta"],
+        x=arrays["x"],
+        round_ids=arrays["round_ids"],
+        is_val=arrays["is_val"],
+        flow=flow,
+        history=tuple(header["history"]),
+    )
+
+
+def build_flow(
+    key: PRNGKeyArray,
+    prior: BoxPrior,
+    embedding: AbstractEmbedding,
+    theta: np.ndarray,
+    x: np.ndarray,
+    config: NPEConfig,
+) -> ConditionalFlow:
+    """A fresh flow whose θ (logit-scale) and x standardisations are fitted on ``theta``/``x``."""
+    z, _ = jax.vmap(prior.to_unbounded)(jnp.asarray(theta))
+    return ConditionalFlow(
+        key,
+        prior,
+        embedding,
+        x.shape[1:],
+        num_layers=config.num_layers,
+        num_bins=config.num_bins,
+        hidden=config.hidden,
+        num_blocks=config.num_blocks,
+        tail_bound=config.tail_bound,
+        use_lu=config.use_lu,
+        theta_standardizer=Standardizer.fit(z, "channel"),
+        x_standardizer=Standardizer.fit(jnp.asarray(x), config.x_standardize),
+    )
+
+
+def _truncated_prior(key, flow, prior, x_o, n, config) -> tuple[Array, dict]:
+    """Prior restricted to the ``1 - ε`` highest-density region of ``flow`` at ``x_o`` (TSNPE)."""
+    k_q, key = jax.random.split(key)
+    ref = _sample(flow, k_q, x_o, config.truncation_samples)
+    threshold = jnp.quantile(_log_prob(flow, ref, x_o), config.truncation_epsilon)
+    out, drawn = [], 0
+    for _ in range(200):
+        key, k = jax.random.split(key)
+        cand = prior.sample(k, max(n, 10_000))
+        drawn += cand.shape[0]
+        out.append(np.asarray(cand[_log_prob(flow, cand, x_o) >= threshold]))
+        if sum(o.shape[0] for o in out) >= n:
+            break
+    acc = np.concatenate(out)[:n]
+    info = {"acceptance": acc.shape[0] / drawn, "num_from_posterior": int(n - acc.shape[0])}
+    if acc.shape[0] < n:  # region too small to reach by rejection: fill with posterior draws
+        acc = np.concatenate([acc, np.asarray(_sample(flow, key, x_o, n - acc.shape[0]))])
+    return jnp.asarray(acc), info
+
+
+def apt(
+    key: PRNGKeyArray,
+    simulate: Callable[[PRNGKeyArray, Array], tuple[Array, Array]],
+    prior: BoxPrior,
+    x_o,
+    *,
+    embedding: AbstractEmbedding,
+    rounds: int,
+    sims_per_round: int | Sequence[int],
+    config: NPEConfig = NPEConfig(),
+    truncate: bool = False,
+    on_round_end: Callable[[APTState], None] | None = None,
+    on_epoch_end: Callable[[int, int, float, float], None] | None = None,
+    state: APTState | None = None,
+    mesh=None,
+) -> tuple[Posterior, APTState]:
+    """Automatic posterior transformation (APT / SNPE-C); ``rounds=1`` is amortised NPE.
+
+    Args:
+        key: PRNG key; the only source of randomness (ignored when resuming from ``state``).
+        simulate: ``simulate(key, theta (N, d)) -> (x (N, ...), valid (N,) bool)``. Draws with
+            ``valid=False`` or non-finite x are excluded from training and counted in the history.
+        prior: the uniform box prior.
+        x_o: the observation (one example).
+        embedding: network mapping one standardised x to the flow's context.
+        rounds: total number of rounds.
+        sims_per_round: simulations per round (an int or one int per round).
+        config: hyperparameters.
+        truncate: TSNPE — propose from the prior truncated to the posterior's HPD region
+            (trained by maximum likelihood) instead of from the posterior (atomic loss).
+        on_round_end: called with the new state after each round (e.g. for checkpointing).
+        on_epoch_end: ``on_epoch_end(round, epoch, train_loss, val_loss)``.
+        state: resume after the rounds recorded in it.
+        mesh: 1-D device mesh for data parallelism (default: all devices).
+
+    Returns:
+        ``(posterior at x_o, final state)``.
+    """
+    x_o = jnp.asarray(x_o)
+    sims = (
+        [int(sims_per_round)] * rounds if np.ndim(sims_per_round) == 0 else [int(s) for s in sims_per_round]
+    )
+    if len(sims) != rounds:
+        raise ValueError(f"sims_per_round has {len(sims)} entries for {rounds} rounds")
+    mesh = data_mesh() if mesh is None else mesh
+    if state is None:
+        state = APTState(
+            round=0,
+            key=key,
+            theta=np.zeros((0, prior.dim), np.float32),
+            x=np.zeros((0, *x_o.shape), np.float32),
+            round_ids=np.zeros((0,), np.int32),
+            is_val=np.zeros((0,), bool),
+            flow=None,
+        )
+    for r in range(state.round, rounds):
+        t0 = time.perf_counter()
+        k_round, k_next = jax.random.split(state.key)
+        k_prop, k_sim, k_split, k_init, k_train = jax.random.split(k_round, 5)
+        n = sims[r]
+        info: dict[str, Any] = {"round": r, "num_simulations": n}
+        if r == 0 or state.flow is None:
+            theta = prior.sample(k_prop, n)
+            info["proposal"] = "prior"
+        elif truncate:
+            theta, tinfo = _truncated_prior(k_prop, state.flow, prior, x_o, n, config)
+            info.update(proposal="truncated_prior", **tinfo)
+        else:
+            theta = _sample(state.flow, k_prop, x_o, n)
+            info["proposal"] = "posterior"
+        x, valid = simulate(k_sim, theta)
+        theta, x = np.asarray(theta, np.float32), np.asarray(x, np.float32)
+        valid = np.asarray(valid, bool).reshape(n)
+        if x.shape[0] != n or x.shape[1:] != x_o.shape:
+            raise ValueError(f"simulate returned x of shape {x.shape}; expected ({n}, *{x_o.shape})")
+        finite = np.all(np.isfinite(x.reshape(n, -1)), axis=1)
+        keep = valid & finite
+        info.update(
+            num_invalid=int((~valid).sum()),
+            num_nonfinite=int((valid & ~finite).sum()),
+            num_used=int(keep.sum()),
+        )
+        m = int(keep.sum())
+        n_val = max(1, int(round(config.validation_fraction * m)))
+        is_val_new = np.zeros(m, bool)
+        is_val_new[np.asarray(jax.random.permutation(k_split, m))[:n_val]] = True
+        all_theta = np.concatenate([state.theta, theta[keep]])
+        all_x = np.concatenate([state.x, x[keep]])
+        round_ids = np.concatenate([state.round_ids, np.full(m, r, np.int32)])
+        is_val = np.concatenate([state.is_val, is_val_new])
+
+        flow = state.flow
+        if flow is None or config.retrain_from_scratch:
+            flow = build_flow(k_init, prior, embedding, all_theta[~is_val], all_x[~is_val], config)
+        if r == 0 or truncate:
+            loss = MaximumLikelihoodLoss()
+        else:
+            loss = AtomicLoss(num_atoms=config.num_atoms, combined=config.combined_loss)
+        flow, finfo = fit(
+            k_train,
+            flow,
+            all_theta,
+            all_x,
+            round_ids == 0,
+            is_val,
+            loss,
+            batch_size=config.batch_size,
+            learning_rate=config.learning_rate,
+            weight_decay=config.weight_decay,
+            clip_norm=config.clip_norm,
+            max_epochs=config.max_epochs,
+            patience=config.patience,
+            on_epoch_end=on_epoch_end,
+            round_index=r,
+            mesh=mesh,
+        )
+        info.update(finfo, loss=type(loss).__name__, train_s=time.perf_counter() - t0)
+        state = APTState(
+            round=r + 1,
+            key=k_next,
+            theta=all_theta,
+            x=all_x,
+            round_ids=round_ids,
+            is_val=is_val,
+            flow=flow,
+            history=(*state.history, info),
+        )
+        if on_round_end is not None:
+            on_round_end(state)
+    if state.flow is None:
+        raise ValueError("rounds must be >= 1")
+    return Posterior(state.flow, x_o), state

@@ -1,0 +1,91 @@
+"""Training losses: maximum likelihood (NPE) and the atomic APT / SNPE-C loss."""
+
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax.scipy.special import logsumexp
+from jaxtyping import Array, Bool, Float, Int, PRNGKeyArray
+
+
+def atom_indices(key: PRNGKeyArray, batch_size: int, num_atoms: int) -> Int[Array, "batch atoms"]:
+    """For each row i, column 0 is i and columns 1.. are ``num_atoms - 1`` DISTINCT other rows.
+
+    The contrasting rows are a uniformly random subset of ``{0..B-1} \\ {i}`` (Gumbel top-k).
+    """
+    if num_atoms < 2 or num_atoms > batch_size:
+        raise ValueError(f"need 2 <= num_atoms <= batch_size, got {num_atoms} and {batch_size}")
+    noise = jax.random.uniform(key, (batch_size, batch_size - 1))
+    _, offsets = jax.lax.top_k(noise, num_atoms - 1)
+    rows = jnp.arange(batch_size)[:, None]
+    others = (rows + offsets + 1) % batch_size
+    return jnp.concatenate([rows, others], axis=1)
+
+
+def atomic_apt_loss(
+    log_prob_fn: Callable[[Array, int], Array],
+    prior_log_prob: Callable[[Array], Array],
+    theta: Float[Array, "batch d"],
+    atoms: Int[Array, "batch atoms"],
+    prior_mask: Bool[Array, " batch"] | None = None,
+) -> Float[Array, ""]:
+    """Atomic APT loss (Greenberg et al. 2019), averaged over the batch.
+
+    For row i with atoms ``A_i = {θ_i, θ_j1, ...}`` (all evaluated at ``x_i``):
+
+        ℓ_i = -[ u_i(θ_i) - logsumexp_{θ ∈ A_i} u_i(θ) ],   u_i(θ) = log q(θ | x_i) - log p(θ)
+
+    and, if ``prior_mask`` is given, ``- log q(θ_i | x_i)`` is added for rows drawn from the prior
+    (the "combined" loss).
+
+    Args:
+        log_prob_fn: ``log_prob_fn(theta_one, i)`` = ``log q(θ | x_i)`` for the i-th example.
+        prior_log_prob: ``prior_log_prob(theta_one)``.
+        theta: the batch of parameters.
+        atoms: from :func:`atom_indices`; column 0 must be the row itself.
+        prior_mask: True where the row's θ was drawn from the prior.
+    """
+    atom_theta = theta[atoms]  # (B, K, d)
+    rows = jnp.arange(theta.shape[0])
+    lq = jax.vmap(lambda th, i: jax.vmap(lambda t: log_prob_fn(t, i))(th))(atom_theta, rows)
+    lp = jax.vmap(jax.vmap(prior_log_prob))(atom_theta)
+    u = lq - lp
+    ll = u[:, 0] - logsumexp(u, axis=1)
+    if prior_mask is not None:
+        ll = ll + jnp.where(prior_mask, lq[:, 0], 0.0)
+    return -jnp.mean(ll)
+
+
+class AbstractLoss(eqx.Module):
+    """``loss(flow, theta, x, prior_mask, key) -> scalar`` on a batch."""
+
+    def __call__(self, flow, theta, x, prior_mask, key):
+        raise NotImplementedError
+
+
+class MaximumLikelihoodLoss(AbstractLoss):
+    """NPE: ``-mean log q(θ_i | x_i)``."""
+
+    def __call__(self, flow, theta, x, prior_mask, key):
+        del prior_mask, key
+        return -jnp.mean(jax.vmap(flow.log_prob)(theta, x))
+
+
+class AtomicLoss(AbstractLoss):
+    """APT / SNPE-C atomic loss with ``num_atoms`` atoms drawn from the batch."""
+
+    num_atoms: int = eqx.field(static=True, default=10)
+    combined: bool = eqx.field(static=True, default=False)
+
+    def __call__(self, flow, theta, x, prior_mask, key):
+        b = theta.shape[0]
+        atoms = atom_indices(key, b, min(self.num_atoms, b))
+        contexts = jax.vmap(flow.context)(x)
+        return atomic_apt_loss(
+            lambda t, i: flow.log_prob_context(t, contexts[i]),
+            flow.prior.log_prob,
+            theta,
+            atoms,
+            prior_mask if self.combined else None,
+        )
