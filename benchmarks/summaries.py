@@ -1,0 +1,202 @@
+"""Handcrafted statistics vs the 1D-CNN embedding, and SBC calibration of the amortized posterior.
+
+    python benchmarks/summaries.py [--quick] [--sims N] [--test N]
+
+Both estimators are amortized (one NPE round on prior simulations, the same simulations for
+both), then evaluated on held-out (θ, x) pairs from the prior: per parameter the RMSE of the
+posterior mean, the mean posterior std, the 90 % coverage; SBC ranks with KS p-values and
+expected coverage at 50/80/95 %. Writes benchmarks/results/summaries.json (+ .md) and
+experiments/results/calibration.json (+ calibration_<embedding>.png).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from vdsbi.diagnostics import expected_coverage, sbc_ks_pvalues, sbc_ranks
+from vdsbi.inference import IdentifySettings, NPEConfig, apt, make_embedding, observation, seed_prior
+from vdsbi.simulator import (
+    PARAM_NAMES,
+    SEED_CHANNELS,
+    StiffnessMixtureNoise,
+    StochasticSimulator,
+    default_vehicle,
+    make_model,
+    seed_profile,
+    sensor_noise,
+)
+
+ROOT = Path(__file__).resolve().parent.parent
+LEVELS = (0.5, 0.8, 0.9, 0.95)
+
+
+def plot_calibration(ranks, cov, num_samples, path, title):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    d = ranks.shape[1]
+    fig, axes = plt.subplots(2, d, figsize=(2.6 * d, 5))
+    for j in range(d):
+        axes[0, j].hist(ranks[:, j], bins=10, range=(0, num_samples), color="C0")
+        axes[0, j].axhline(ranks.shape[0] / 10, color="k", ls="--")
+        axes[0, j].set_title(PARAM_NAMES[j], fontsize=9)
+        axes[1, j].plot([0, 1], [0, 1], "k--")
+        axes[1, j].plot(LEVELS, cov[:, j], "o-")
+        axes[1, j].set_xlabel("nominal")
+    axes[0, 0].set_ylabel("SBC rank count")
+    axes[1, 0].set_ylabel("empirical coverage")
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--sims", type=int, default=None)
+    ap.add_argument("--test", type=int, default=None, help="held-out simulations (≥ 200 for SBC)")
+    ap.add_argument("--posterior-samples", type=int, default=500)
+    ap.add_argument("--embeddings", default="stats,cnn")
+    args = ap.parse_args(argv)
+    n_sims = args.sims or (400 if args.quick else 5000)
+    n_test = args.test or (20 if args.quick else 200)
+    n_post = 100 if args.quick else args.posterior_samples
+    out_b = ROOT / "benchmarks" / "results"
+    out_e = ROOT / "experiments" / "results"
+    out_b.mkdir(parents=True, exist_ok=True)
+    out_e.mkdir(parents=True, exist_ok=True)
+
+    vehicle, inputs = default_vehicle(), seed_profile()
+    key = jax.random.key(7)
+    k_mix, k_train, k_test, k_th, k_rest = jax.random.split(key, 5)
+    simulator = StochasticSimulator(
+        make_model(vehicle),
+        inputs,
+        SEED_CHANNELS,
+        (10.0, 11.0),
+        sensor_noise("seed"),
+        StiffnessMixtureNoise(k_mix),
+    )
+    prior = seed_prior()
+    theta_test = prior.sample(k_th, n_test)
+    t0 = time.perf_counter()
+    ys_test, ok_test = simulator(k_test, theta_test)
+    sim_test_s = time.perf_counter() - t0
+    ok_test = np.asarray(ok_test)
+    u = jnp.stack([inputs.steer, inputs.torque_front, inputs.torque_rear], -1).astype(jnp.float32)
+    results = {
+        "settings": {"sims": n_sims, "test": n_test, "posterior_samples": n_post, "rounds": 1},
+        "embeddings": {},
+    }
+    calib = {}
+    md = [f"# Summaries vs CNN ({n_sims} prior simulations, {int(ok_test.sum())} held-out sets)", ""]
+    for emb in args.embeddings.split(","):
+        settings = IdentifySettings(
+            rounds=1,
+            sims_per_round=n_sims,
+            embedding=emb,
+            config=NPEConfig(
+                batch_size=256, learning_rate=1e-3, max_epochs=40 if not args.quick else 10, patience=6
+            ),
+        )
+        obs = jax.jit(jax.vmap(lambda r: observation(r, u, emb)))
+        x_test = np.asarray(obs(ys_test))
+
+        def simulate(k, theta):
+            ys, ok = simulator(k, jnp.asarray(theta, jnp.float32))
+            return obs(ys), ok
+
+        t0 = time.perf_counter()
+        embedding = make_embedding(jax.random.key(1), x_test.shape[1:], settings)
+        posterior, state = apt(
+            k_train,
+            simulate,
+            prior,
+            x_test[0],
+            embedding=embedding,
+            rounds=1,
+            sims_per_round=n_sims,
+            config=settings.config,
+        )
+        train_s = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        keys = jax.random.split(k_rest, n_test)
+        sample_one = lambda k, x: posterior.sample(k, n_post, x=x)
+        samples = np.stack([np.asarray(sample_one(keys[i], x_test[i])) for i in range(n_test)])
+        sample_s = time.perf_counter() - t0
+        truths = np.asarray(theta_test)[ok_test]
+        samples = samples[ok_test]
+        scale = np.where(np.array([n.startswith("C_") for n in PARAM_NAMES]), 1e5, 1.0)
+        mean = samples.mean(1)
+        rmse = np.sqrt(((mean - truths) ** 2).mean(0)) / scale
+        std = samples.std(1).mean(0) / scale
+        cov = expected_coverage(samples, truths, LEVELS)
+        ranks = sbc_ranks(samples, truths)
+        ks = sbc_ks_pvalues(ranks, n_post)
+        results["embeddings"][emb] = {
+            "rmse": dict(zip(PARAM_NAMES, rmse.tolist())),
+            "mean_std": dict(zip(PARAM_NAMES, std.tolist())),
+            "coverage_90": dict(zip(PARAM_NAMES, cov[LEVELS.index(0.9)].tolist())),
+            "wall_s": {"training_incl_simulation": train_s, "sampling": sample_s},
+            "units": "l_f, h_cog in m; stiffness in 1e5 N or N/rad",
+        }
+        calib[emb] = {
+            "ks_pvalues": dict(zip(PARAM_NAMES, ks.tolist())),
+            "coverage": {str(lv): dict(zip(PARAM_NAMES, cov[i].tolist())) for i, lv in enumerate(LEVELS)},
+            "num_test": int(ok_test.sum()),
+            "num_posterior_samples": n_post,
+        }
+        plot_calibration(
+            ranks,
+            cov,
+            n_post,
+            out_e / f"calibration_{emb}{'_quick' if args.quick else ''}.png",
+            f"Amortized NPE ({emb}), {n_sims} sims: SBC ranks and coverage",
+        )
+        md += [
+            f"## {emb}",
+            "",
+            "| | " + " | ".join(PARAM_NAMES) + " |",
+            "|---" * 7 + "|",
+            "| RMSE of mean | " + " | ".join(f"{v:.4f}" for v in rmse) + " |",
+            "| mean post. std | " + " | ".join(f"{v:.4f}" for v in std) + " |",
+            "| 90 % coverage | " + " | ".join(f"{v:.2f}" for v in cov[LEVELS.index(0.9)]) + " |",
+            "| SBC KS p | " + " | ".join(f"{v:.3f}" for v in ks) + " |",
+            *[
+                f"| coverage @{int(lv * 100)} % | " + " | ".join(f"{v:.2f}" for v in cov[i]) + " |"
+                for i, lv in enumerate(LEVELS)
+            ],
+            "",
+            f"training (incl. simulation) {train_s:.0f} s, sampling {sample_s:.1f} s",
+            "",
+        ]
+        print("\n".join(md[-12:]), flush=True)
+    if {"stats", "cnn"} <= set(results["embeddings"]):
+        r = results["embeddings"]
+        wins = {n: r["cnn"]["rmse"][n] < r["stats"]["rmse"][n] for n in PARAM_NAMES}
+        results["cnn_better_rmse"] = wins
+        md += [
+            "CNN lower RMSE than statistics: "
+            + ", ".join(f"{n}: {'yes' if w else 'no'}" for n, w in wins.items())
+        ]
+    results["simulation_test_s"] = sim_test_s
+    suffix = "_quick" if args.quick else ""
+    (out_b / f"summaries{suffix}.json").write_text(json.dumps(results, indent=2))
+    (out_b / f"summaries{suffix}.md").write_text("\n".join(md) + "\n")
+    (out_e / f"calibration{suffix}.json").write_text(json.dumps(calib, indent=2))
+    print("\n".join(md))
+    return results, calib
+
+
+if __name__ == "__main__":
+    main()
