@@ -6,6 +6,7 @@ from ._effects import (
     AbstractEffect as AbstractEffect,
     Context as Context,
     get_effect as get_effect,
+    register_effect as register_effect,
 )
 from ._inputs import Inputs as Inputs
 from ._profiles import (

@@ -16,6 +16,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -145,9 +146,12 @@ class VehicleModel(eqx.Module):
             a_x_new = (fx_f * cos_d - fy_f * sin_d + fx_r + fbx) / m
             return a_x_new, (fz_f, fz_r, fx_f, fy_f, fx_r, fy_r)
 
-        a_x = zero
-        for _ in range(LOAD_ITERATIONS):
-            a_x, forces = tire_forces(a_x)
+        # A rolled loop on purpose: its outputs are materialised once. Unrolled, XLA's loop
+        # fusion re-derives the whole load/Dugoff chain (tan included) inside each of the nine
+        # derivative kernels, which made the batched RHS several times slower.
+        _, forces = jax.lax.fori_loop(
+            0, LOAD_ITERATIONS - 1, lambda _, c: tire_forces(c[0]), tire_forces(zero)
+        )
         fz_f, fz_r, fx_f, fy_f, fx_r, fy_r = forces
         a_x = (fx_f * cos_d - fy_f * sin_d + fx_r + fbx) / m
         a_y = (fx_f * sin_d + fy_f * cos_d + fy_r + fby) / m

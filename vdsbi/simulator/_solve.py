@@ -159,19 +159,26 @@ def solve(
     else:
         substeps = max(1, round(inputs.dt / solver.dt))
         h = inputs.dt / substeps
-        # scan_kind='lax': diffrax's default checkpointed stage loop is a custom_vjp, which
-        # forbids forward-mode autodiff (jax.jacfwd); the plain scan allows both modes.
-        rk4 = RK4(scan_kind="lax")
-        state0 = rk4.init(term, inputs.t0, inputs.t0 + h, y0, args)
+        f = lambda t, y: model.vector_field(t, y, args)
 
-        def sample_interval(carry, k):
-            y, st = carry
-            for j in range(substeps):
-                t0 = inputs.t0 + k * inputs.dt + j * h
-                y, _, _, st, _ = rk4.step(term, t0, t0 + h, y, args, st, made_jump=False)
-            return (y, st), model.sensors(inputs.t0 + (k + 1) * inputs.dt, y, args)
+        def rk4_step(t0, y):
+            # Classical RK4 (the `RK4` tableau) written out in plain jnp: the four unrolled
+            # stages fuse better than diffrax's stage loop (~1/3 less CPU per batched step),
+            # and plain jnp supports both autodiff modes (jax.jacfwd and jax.grad).
+            k1 = f(t0, y)
+            k2 = f(t0 + 0.5 * h, y + (0.5 * h) * k1)
+            k3 = f(t0 + 0.5 * h, y + (0.5 * h) * k2)
+            k4 = f(t0 + h, y + h * k3)
+            return y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
-        _, ys = jax.lax.scan(sample_interval, (y0, state0), jnp.arange(inputs.num_samples - 1))
+        def sample_interval(y, k):
+            t_k = inputs.t0 + k * inputs.dt
+            # Rolled over substeps: same speed as unrolled, and compile time stays flat for
+            # fine reference steps.
+            y = jax.lax.fori_loop(0, substeps, lambda j, y: rk4_step(t_k + j * h, y), y)
+            return y, model.sensors(inputs.t0 + (k + 1) * inputs.dt, y, args)
+
+        _, ys = jax.lax.scan(sample_interval, y0, jnp.arange(inputs.num_samples - 1))
         ys = jnp.concatenate([model.sensors(inputs.t0, y0, args)[None], ys])
         solved = jnp.asarray(True)
     ok = (

@@ -34,3 +34,21 @@ def get_effect(name: str) -> AbstractEffect:
     if name not in EFFECTS:
         raise ValueError(f"effects: unknown effect '{name}' (known: {', '.join(EFFECTS)})")
     return EFFECTS[name]()
+
+
+def register_effect(cls: type[AbstractEffect]) -> type[AbstractEffect]:
+    """Add an effect class to `EFFECTS` under `cls.name` (usable as a class decorator).
+
+    The built-in effects are listed in `EFFECTS` above; this is for effects defined outside
+    the package (experiments, tests). Raises ValueError on a duplicate or incomplete class.
+    """
+    needed = ("name", "param_names", "units", "null", "typical", "description")
+    missing = [a for a in needed if not hasattr(cls, a)]
+    if missing:
+        raise ValueError(f"effects: {cls.__name__} lacks class attribute(s) {missing}")
+    if not len(cls.param_names) == len(cls.units) == len(cls.null) == len(cls.typical):
+        raise ValueError(f"effects: {cls.__name__}: param_names, units, null, typical differ in length")
+    if cls.name in EFFECTS and EFFECTS[cls.name] is not cls:
+        raise ValueError(f"effects: an effect named '{cls.name}' is already registered")
+    EFFECTS[cls.name] = cls
+    return cls

@@ -1,4 +1,9 @@
+import jax.numpy as jnp
+
 from ._base import AbstractEffect
+
+#: Smallest time constant used, s: keeps the lag state stable for RK4 at the default 2.5 ms step.
+TAU_FLOOR = 1e-3
 
 
 class SteeringLag(AbstractEffect):
@@ -16,8 +21,10 @@ class SteeringLag(AbstractEffect):
         return u0[:1]
 
     def state_rhs(self, p, z, u_cmd):
-        # τ floored: τ → 0 recovers the base model without an infinitely stiff state.
-        return (u_cmd[:1] - z) / (abs(p[0]) + 1e-3)
+        # τ = 0 (null) is the base model exactly: the state is frozen and bypassed in `inputs`;
+        # otherwise τ is floored at TAU_FLOOR, so τ → 0 needs no infinitely stiff state.
+        tau = jnp.maximum(jnp.abs(p[0]), TAU_FLOOR)
+        return jnp.where(p[0] == 0, 0.0, (u_cmd[:1] - z) / tau)
 
     def inputs(self, p, z, u):
-        return u.at[0].set(z[0])
+        return u.at[0].set(jnp.where(p[0] == 0, u[0], z[0]))

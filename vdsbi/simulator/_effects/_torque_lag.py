@@ -1,4 +1,7 @@
+import jax.numpy as jnp
+
 from ._base import AbstractEffect
+from ._steering_lag import TAU_FLOOR
 
 
 class TorqueLag(AbstractEffect):
@@ -16,7 +19,9 @@ class TorqueLag(AbstractEffect):
         return u0[1:]
 
     def state_rhs(self, p, z, u_cmd):
-        return (u_cmd[1:] - z) / (abs(p[0]) + 1e-3)
+        # As SteeringLag: τ = 0 is the base model exactly, else τ is floored at TAU_FLOOR.
+        tau = jnp.maximum(jnp.abs(p[0]), TAU_FLOOR)
+        return jnp.where(p[0] == 0, 0.0, (u_cmd[1:] - z) / tau)
 
     def inputs(self, p, z, u):
-        return u.at[1:].set(z)
+        return u.at[1:].set(jnp.where(p[0] == 0, u[1:], z))
