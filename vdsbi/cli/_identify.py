@@ -1,0 +1,71 @@
+"""`vdsbi identify REC --vehicle V --out DIR`: posterior over the vehicle's parameters."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..io._errors import InputError
+
+
+def _segment(text: str) -> tuple[float, float]:
+    try:
+        a, b = (float(v) for v in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected T0:T1 in seconds, got {text!r}") from None
+    return a, b
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    p = subparsers.add_parser(
+        "identify",
+        help="identify the vehicle's parameters from a recording (posterior with uncertainty)",
+        description="Pick the usable stretch of REC, simulate, train a neural posterior (APT), and "
+        "write posterior.json, samples.csv, pairplot.png, ppc.png and the estimator into DIR. "
+        "Each finished round is checkpointed in DIR; --resume continues an interrupted run.",
+    )
+    p.add_argument("recording", metavar="REC", help="recording: .csv, .parquet or ROS2 bag")
+    p.add_argument("--vehicle", required=True, metavar="V", help="vehicle constants (.json or .yaml)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    p.add_argument("--rounds", type=int, default=2, help="APT rounds (default 2)")
+    p.add_argument("--sims", type=int, default=1000, help="simulations per round (default 1000)")
+    p.add_argument("--embedding", choices=("cnn", "stats"), default="stats", help="default stats")
+    p.add_argument("--epochs", type=int, default=None, help="max training epochs per round (default 40)")
+    p.add_argument("--samples", type=int, default=1000, help="posterior samples written (default 1000)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--resume", action="store_true", help="continue from DIR's checkpoint")
+    p.add_argument("--quiet", action="store_true", help="no progress bars or messages")
+    p.add_argument("--segment", type=_segment, metavar="T0:T1", help="use this stretch, s")
+    p.add_argument("--max-duration", type=float, default=20.0, help="longest stretch used, s (default 20)")
+    p.add_argument("--rate", type=float, default=200.0, help="model rate, Hz (default 200)")
+    return p
+
+
+def run(args) -> int:
+    from .. import api
+
+    if args.max_duration <= 0:
+        raise InputError("settings", "--max-duration", "must be > 0")
+    quiet = args.quiet
+    log = None if quiet else (lambda s: print(s, flush=True))
+    res = api.identify(
+        args.recording,
+        args.vehicle,
+        rounds=args.rounds,
+        sims=args.sims,
+        embedding=args.embedding,
+        seed=args.seed,
+        out_dir=args.out,
+        resume=args.resume,
+        epochs=args.epochs,
+        num_samples=args.samples,
+        segment=args.segment,
+        max_duration=args.max_duration,
+        rate=args.rate,
+        progress=not quiet and sys.stderr.isatty(),
+        log=log,
+    )
+    if not quiet:
+        print(res.table())
+        print(f"wrote {args.out}/posterior.json, samples.csv, pairplot.png, ppc.png, {api.ESTIMATOR}")
+    return 0
