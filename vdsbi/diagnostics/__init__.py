@@ -15,3 +15,9 @@ from ._fisher import (
     report_markdown as report_markdown,
     score_fisher_mc as score_fisher_mc,
 )
+from ._misspecification import (
+    Localisation as Localisation,
+    MisspecificationTest as MisspecificationTest,
+    locate_mismatch as locate_mismatch,
+    misspecification_test as misspecification_test,
+)
