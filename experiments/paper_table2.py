@@ -9,6 +9,7 @@ Writes experiments/results/table2.md, table2.json and fig3.png (suffixed for --q
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -98,7 +99,7 @@ def pairplot(samples: np.ndarray, truth: np.ndarray, labels: list[str], path: Pa
 
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--quick", action="store_true", help="2 rounds × 300 simulations")
+    ap.add_argument("--quick", action="store_true", help="2 rounds × 200 simulations, short training")
     ap.add_argument("--embedding", choices=("cnn", "stats"), default="cnn")
     ap.add_argument("--literal-prior", action="store_true", help="the seed's prior incl. negative C_kappa")
     ap.add_argument("--rounds", type=int, default=None)
@@ -107,7 +108,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
     rounds = args.rounds or (2 if args.quick else 5)
-    sims = args.sims or (300 if args.quick else 5000)
+    sims = args.sims or (200 if args.quick else 5000)
     suffix = ("_quick" if args.quick else "") + ("_stats" if args.embedding == "stats" else "")
     suffix += "_literal" if args.literal_prior else ""
     args.out.mkdir(parents=True, exist_ok=True)
@@ -128,6 +129,10 @@ def main(argv=None) -> dict:
     assert bool(ok[0]), "the observation failed to simulate"
     prior = seed_prior(literal=args.literal_prior)
     settings = IdentifySettings(rounds=rounds, sims_per_round=sims, embedding=args.embedding)
+    if args.quick:
+        settings = dataclasses.replace(
+            settings, config=dataclasses.replace(settings.config, max_epochs=15, patience=4)
+        )
     timing = {"simulation": 0.0}
     t_start = time.perf_counter()
 
