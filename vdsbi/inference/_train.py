@@ -58,6 +58,14 @@ def _round_down(n: int, m: int) -> int:
     return (n // m) * m
 
 
+def _batch_size(requested: int, available: int, ndev: int) -> int:
+    """``requested`` if enough data, else the largest power of two <= ``available`` (so the
+    few distinct shapes across growing rounds are compiled once each), a multiple of ``ndev``."""
+    if available >= requested:
+        return _round_down(requested, ndev)
+    return _round_down(1 << (max(available, 1).bit_length() - 1), ndev)
+
+
 def fit(
     key: PRNGKeyArray,
     flow: ConditionalFlow,
@@ -85,8 +93,8 @@ def fit(
     mesh = data_mesh() if mesh is None else mesh
     ndev = mesh.devices.size
     tr, va = np.flatnonzero(~is_val), np.flatnonzero(is_val)
-    bsz = _round_down(min(batch_size, tr.size), ndev)
-    vsz = _round_down(min(batch_size, va.size), ndev)
+    bsz = _batch_size(batch_size, tr.size, ndev)
+    vsz = _batch_size(batch_size, va.size, ndev)
     if bsz < 2 or vsz < 1:
         raise ValueError(
             f"Too few simulations to train: {tr.size} training / {va.size} validation examples "

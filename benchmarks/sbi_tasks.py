@@ -1,0 +1,166 @@
+"""C2ST of NPE (1 round) and APT (10 rounds) on the sbibm tasks, beside the published figures.
+
+Usage:
+    python benchmarks/sbi_tasks.py            # full grid (long on a CPU)
+    python benchmarks/sbi_tasks.py --quick    # two_moons, NPE+APT at 10³, 2 observations
+
+Writes ``benchmarks/results/sbi_tasks.json`` after every finished cell (nothing is lost if the
+run is interrupted) and ``benchmarks/results/sbi_tasks.md`` with the table.
+
+Protocol (differences from sbibm are stated, not hidden):
+* observations 1..n_obs of our own tasks (θ_o ~ prior, x_o ~ simulator, fixed seeds);
+  reference posteriors are ours (exact for two_moons / gaussian_* ; MCMC for slcp);
+* C2ST on ``--num-samples`` (default 10 000, as sbibm) posterior vs reference samples;
+* NPE is amortised: ONE network per (task, budget), trained once and evaluated at every
+  observation (sbibm retrains per observation); ``train_s`` is that single training time;
+* APT is run per observation: 10 rounds of budget/10 simulations; ``train_s`` is the mean
+  wall time per observation (simulation + training, all rounds).
+"""
+
+import argparse
+import dataclasses
+import json
+import os
+import time
+
+import jax
+import numpy as np
+
+from vdsbi.diagnostics import c2st
+from vdsbi.inference import IdentityEmbedding, NPEConfig, apt
+from vdsbi.tasks import get_task
+
+PUBLISHED = {  # sbibm (Lueckmann et al. 2021), mean C2ST over 10 observations, sbi + NSF
+    ("two_moons", "npe"): (0.725, 0.606, 0.542),
+    ("two_moons", "apt"): (0.643, 0.554, 0.530),
+    ("slcp", "npe"): (0.975, 0.901, 0.831),
+    ("slcp", "apt"): (0.965, 0.845, 0.666),
+    ("gaussian_mixture", "npe"): (0.731, 0.661, 0.555),
+    ("gaussian_mixture", "apt"): (0.697, 0.583, 0.533),
+    ("gaussian_linear_uniform", "npe"): (0.696, 0.553, 0.509),
+    ("gaussian_linear_uniform", "apt"): (0.631, 0.527, 0.507),
+}
+BUDGETS = (1_000, 10_000, 100_000)
+TASKS = ("two_moons", "slcp", "gaussian_mixture", "gaussian_linear_uniform")
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def config_for(budget: int) -> NPEConfig:
+    return NPEConfig(
+        batch_size=128 if budget <= 10_000 else 512, learning_rate=5e-4, patience=20, max_epochs=500
+    )
+
+
+def run_cell(task_name, method, budget, n_obs, num_samples, seed):
+    task = get_task(task_name)
+    cfg = config_for(budget)
+    emb = IdentityEmbedding(task.dim_x)
+    key = jax.random.fold_in(jax.random.key(seed), budget)
+    scores, times, invalid = [], [], 0
+    if method == "npe":
+        _, x1 = task.observation(1)
+        t0 = time.perf_counter()
+        post, state = apt(
+            key, task.simulate, task.prior, x1, embedding=emb, rounds=1, sims_per_round=budget, config=cfg
+        )
+        times.append(time.perf_counter() - t0)
+        invalid += state.num_invalid
+    for i in range(1, n_obs + 1):
+        _, x_o = task.observation(i)
+        if method == "apt":
+            t0 = time.perf_counter()
+            post, state = apt(
+                jax.random.fold_in(key, i),
+                task.simulate,
+                task.prior,
+                x_o,
+                embedding=emb,
+                rounds=10,
+                sims_per_round=budget // 10,
+                config=cfg,
+            )
+            times.append(time.perf_counter() - t0)
+            invalid += state.num_invalid
+        samples = post.sample(jax.random.fold_in(key, 1000 + i), num_samples, x=x_o)
+        ref = task.reference_posterior_samples(i, num_samples)
+        scores.append(c2st(jax.random.fold_in(key, 2000 + i), ref, samples))
+        print(f"  {task_name} {method} {budget} obs {i}: c2st={scores[-1]:.3f}", flush=True)
+    return {
+        "task": task_name,
+        "method": method,
+        "budget": budget,
+        "c2st_mean": float(np.mean(scores)),
+        "c2st_sd": float(np.std(scores, ddof=1)) if len(scores) > 1 else 0.0,
+        "n_obs": len(scores),
+        "train_s": float(np.mean(times)),
+        "c2st": [float(s) for s in scores],
+        "num_invalid_simulations": int(invalid),
+        "published": PUBLISHED[(task_name, method)][BUDGETS.index(budget)],
+    }
+
+
+def table(results) -> str:
+    by = {(r["task"], r["method"], r["budget"]): r for r in results}
+    head = "| task | method | " + " | ".join(f"{b:.0e}" for b in BUDGETS) + " |"
+    lines = [head, "|---|---|" + "---|" * len(BUDGETS)]
+    for t in TASKS:
+        for m in ("npe", "apt"):
+            cells = []
+            for j, b in enumerate(BUDGETS):
+                pub = PUBLISHED[(t, m)][j]
+                r = by.get((t, m, b))
+                if r is None:
+                    cells.append(f"not run (sbibm {pub:.3f})")
+                else:
+                    mark = "✓" if r["c2st_mean"] <= pub else "✗"
+                    cells.append(
+                        f"{r['c2st_mean']:.3f}±{r['c2st_sd']:.3f} (sbibm {pub:.3f}) {mark} [{r['train_s']:.0f}s]"
+                    )
+            lines.append(f"| {t} | {m} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--tasks", nargs="+", default=list(TASKS))
+    ap.add_argument("--methods", nargs="+", default=["npe", "apt"])
+    ap.add_argument("--budgets", nargs="+", type=int, default=list(BUDGETS))
+    ap.add_argument("--n-obs", type=int, default=5)
+    ap.add_argument("--num-samples", type=int, default=10_000)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", default=os.path.join(HERE, "results", "sbi_tasks.json"))
+    args = ap.parse_args()
+    if args.quick:
+        args.tasks, args.budgets, args.n_obs = ["two_moons"], [1_000], 2
+    os.makedirs(os.path.dirname(args.out), exist_ok=True)
+    results = []
+    if os.path.exists(args.out):  # resume: keep finished cells
+        with open(args.out) as f:
+            results = json.load(f).get("results", [])
+    done = {(r["task"], r["method"], r["budget"]) for r in results}
+    cells = [(b, m, t) for b in sorted(args.budgets) for m in args.methods for t in args.tasks]
+    for b, m, t in cells:
+        if (t, m, b) in done:
+            continue
+        print(f"cell {t} {m} {b}", flush=True)
+        results.append(run_cell(t, m, b, args.n_obs, args.num_samples, args.seed))
+        meta = {
+            "devices": [str(d) for d in jax.devices()],
+            "config": {str(b): dataclasses.asdict(config_for(b)) for b in BUDGETS},
+            "protocol": __doc__,
+        }
+        tmp = args.out + ".tmp"
+        with open(tmp, "w") as f:
+            json.dump({"results": results, "meta": meta}, f, indent=1)
+        os.replace(tmp, args.out)
+        md = os.path.splitext(args.out)[0] + ".md"
+        with open(md + ".tmp", "w") as f:
+            f.write("# sbibm tasks: C2ST (mean±sd over observations) [training wall time]\n\n")
+            f.write(table(results) + "\n")
+        os.replace(md + ".tmp", md)
+        print(table(results), flush=True)
+
+
+if __name__ == "__main__":
+    main()

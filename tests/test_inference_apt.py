@@ -1,0 +1,141 @@
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from conftest import tree_allclose
+
+from vdsbi.inference import (
+    TRACE_COUNTS,
+    AtomicLoss,
+    BoxPrior,
+    IdentityEmbedding,
+    MaximumLikelihoodLoss,
+    NPEConfig,
+    apt,
+    atom_indices,
+    atomic_apt_loss,
+    build_flow,
+    init_opt_state,
+    load_state,
+    make_optimizer,
+    save_state,
+    train_step,
+)
+
+TINY = NPEConfig(num_layers=2, num_bins=4, hidden=8, batch_size=32, max_epochs=3, patience=2, num_atoms=4)
+
+
+def _gauss_sim(key, theta):
+    return theta + 0.1 * jax.random.normal(key, theta.shape), jnp.ones(theta.shape[0], bool)
+
+
+def test_atom_indices_distinct(getkey):
+    idx = np.asarray(atom_indices(getkey(), 16, 10))
+    assert idx.shape == (16, 10)
+    assert np.all(idx[:, 0] == np.arange(16))
+    for row in idx:
+        assert len(set(row.tolist())) == 10  # distinct, hence never the row itself twice
+
+
+def test_atomic_loss_hand_computed():
+    theta = jnp.array([[0.1], [0.5], [-0.3]])
+    x = jnp.array([[0.0], [1.0], [-1.0]])
+    atoms = jnp.array([[0, 2], [1, 0], [2, 1]])
+
+    def log_q(t, i):
+        return -((t[0] - x[i, 0]) ** 2)
+
+    def log_prior(t):  # non-constant on purpose, to check the prior correction
+        return 0.5 * t[0]
+
+    # by hand: u(θ) = -(θ - x_i)² - θ/2
+    u = {
+        (0, 0): -(0.1**2) - 0.05,
+        (0, 2): -(0.3**2) + 0.15,
+        (1, 1): -(0.5**2) - 0.25,
+        (1, 0): -(0.9**2) - 0.05,
+        (2, 2): -(0.7**2) + 0.15,
+        (2, 1): -(1.5**2) - 0.25,
+    }
+    rows = [(0, 0, 2), (1, 1, 0), (2, 2, 1)]
+    ll = [u[(i, a)] - np.log(np.exp(u[(i, a)]) + np.exp(u[(i, b)])) for i, a, b in rows]
+    expected = -np.mean(ll)
+    got = atomic_apt_loss(log_q, log_prior, theta, atoms)
+    np.testing.assert_allclose(float(got), expected, rtol=1e-6)
+    # combined loss adds -log q(θ_i | x_i) on prior rows
+    mask = jnp.array([True, False, True])
+    expected_c = -np.mean([ll[0] - 0.1**2, ll[1], ll[2] - 0.7**2])
+    got_c = atomic_apt_loss(log_q, log_prior, theta, atoms, mask)
+    np.testing.assert_allclose(float(got_c), expected_c, rtol=1e-6)
+
+
+def test_train_step_does_not_retrace(getkey):
+    prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
+    theta = np.asarray(prior.sample(getkey(), 256))
+    x = np.asarray(_gauss_sim(getkey(), theta)[0])
+    flow = build_flow(getkey(), prior, IdentityEmbedding(2), theta, x, TINY)
+    opt = make_optimizer(1e-3, 1e-4, 5.0)
+    state = init_opt_state(flow, opt)
+    for loss in (MaximumLikelihoodLoss(), AtomicLoss(num_atoms=4)):
+        before = TRACE_COUNTS["train_step"]
+        values = []
+        for i in range(4):
+            batch = (theta[i * 32 : (i + 1) * 32], x[i * 32 : (i + 1) * 32], np.ones(32, bool))
+            flow, state, v = train_step(flow, state, batch, getkey(), loss, opt)
+            values.append(float(v))
+        assert TRACE_COUNTS["train_step"] - before == 1
+        assert np.all(np.isfinite(values))
+
+
+def test_nonfinite_and_invalid_simulations_are_excluded_and_counted(getkey):
+    prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
+    seen = {}
+
+    def sim(key, theta):
+        x = theta + 0.1 * jax.random.normal(key, theta.shape)
+        x = jnp.where((theta[:, :1] > 0.5), jnp.nan, x)  # non-finite outputs
+        x = jnp.where((theta[:, :1] < -0.8), jnp.inf, x)
+        valid = theta[:, 1] < 0.6  # simulator-reported failures
+        seen["theta"], seen["valid"] = np.asarray(theta), np.asarray(valid)
+        return x, valid
+
+    _, state = apt(
+        getkey(),
+        sim,
+        prior,
+        jnp.zeros(2),
+        embedding=IdentityEmbedding(2),
+        rounds=1,
+        sims_per_round=400,
+        config=TINY,
+    )
+    th, valid = seen["theta"], seen["valid"]
+    nonfinite = (th[:, 0] > 0.5) | (th[:, 0] < -0.8)
+    h = state.history[0]
+    assert h["num_invalid"] == int((~valid).sum()) > 0
+    assert h["num_nonfinite"] == int((valid & nonfinite).sum()) > 0
+    assert h["num_used"] == int((valid & ~nonfinite).sum()) == state.theta.shape[0]
+    assert state.num_invalid == 400 - h["num_used"]
+    assert np.all(np.isfinite(state.x))
+
+
+def test_resume_from_state_is_bit_identical(tmp_path, getkey):
+    prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
+    cfg = dataclasses.replace(TINY, max_epochs=2)
+    kw = dict(embedding=IdentityEmbedding(2), sims_per_round=200, config=cfg)
+    key, x_o = getkey(), jnp.array([0.2, -0.1])
+    post_full, state_full = apt(key, _gauss_sim, prior, x_o, rounds=2, **kw)
+
+    saved = []
+    apt(key, _gauss_sim, prior, x_o, rounds=1, on_round_end=lambda s: save_state(tmp_path / "s.npz", s), **kw)
+    saved = load_state(tmp_path / "s.npz")
+    assert saved.round == 1
+    post_res, state_res = apt(jax.random.key(999), _gauss_sim, prior, x_o, rounds=2, state=saved, **kw)
+
+    assert state_res.history[1]["loss"] == "AtomicLoss"
+    np.testing.assert_array_equal(state_res.theta, state_full.theta)
+    np.testing.assert_array_equal(state_res.x, state_full.x)
+    assert tree_allclose(post_res.flow, post_full.flow, rtol=0, atol=0)
+    k = getkey()
+    np.testing.assert_array_equal(np.asarray(post_res.sample(k, 100)), np.asarray(post_full.sample(k, 100)))
