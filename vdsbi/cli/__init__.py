@@ -6,7 +6,16 @@ and list it in `COMMANDS`.
 """
 
 #: Modules (relative to this package) that each provide one subcommand, in help order.
-COMMANDS: tuple[str, ...] = ("._check", "._simulate", "._identify", "._sample", "._demo", "._diagnose")
+COMMANDS: tuple[str, ...] = (
+    "._check",
+    "._simulate",
+    "._identify",
+    "._sample",
+    "._demo",
+    "._observability",
+    "._design",
+    "._diagnose",
+)
 
 from ._main import build_parser as build_parser, main as main  # noqa: E402
 from ._output import output_dir as output_dir  # noqa: E402

@@ -1,6 +1,15 @@
 """Diagnostics for posterior estimates."""
 
 from ._c2st import c2st as c2st
+from ._design import (
+    DesignProblem as DesignProblem,
+    DesignResult as DesignResult,
+    Limits as Limits,
+    Maneuver as Maneuver,
+    check_limits as check_limits,
+    design as design,
+    design_problem as design_problem,
+)
 from ._fisher import (
     Fisher as Fisher,
     FitResult as FitResult,

@@ -217,6 +217,7 @@ class Fisher(eqx.Module):
         fim_scaled: F in scaled units (information about z), (P, P).
         readings: noise-free readings of the used channels, (T, C).
         std: noise std used, (T, C).
+        jac: ∂readings/∂z in scaled units, (T, C, P).
     """
 
     names: tuple[str, ...] = eqx.field(static=True)
@@ -226,6 +227,7 @@ class Fisher(eqx.Module):
     fim_scaled: Float[Array, "P P"]
     readings: Float[Array, "T C"]
     std: Float[Array, "T C"]
+    jac: Float[Array, "T C P"]
 
     @property
     def fim(self) -> Float[Array, "P P"]:
@@ -278,7 +280,7 @@ def model_fisher(
         [jnp.asarray(theta, dtype=float)] + [jnp.asarray(p, dtype=float) for p in effect_params]
     )
     scale = jnp.asarray(param_scale(model, flat))
-    fisher_z, ys, std = _model_fisher_scaled(
+    fisher_z, ys, std, jac = _model_fisher_scaled(
         model,
         flat / scale,
         scale,
@@ -298,6 +300,7 @@ def model_fisher(
         fim_scaled=fisher_z,
         readings=ys,
         std=std,
+        jac=jac,
     )
 
 
@@ -317,7 +320,7 @@ def _model_fisher_scaled(model, z, scale, inputs, v0, idx, rel, add, floor_fract
     mean = scaled_mean_fn(model, scale, inputs, v0, idx, solver)
     jac, ys = _jacfwd_and_value(mean, z)
     std = noise_std(ys, rel, add, floor_fraction)
-    return fisher_from_jacobian(jac, std), ys, std
+    return fisher_from_jacobian(jac, std), ys, std, jac
 
 
 # --------------------------------------------------------------------------- report
