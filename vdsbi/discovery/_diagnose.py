@@ -35,6 +35,18 @@ from ._rank import STRONG, Ranked, choose, rank, separability
 IdentifyFn = Callable[[Fitter, tuple, "np.ndarray | None", int], FitResult]
 
 
+def typical_theta(vehicle: Vehicle) -> np.ndarray:
+    """A typical passenger car in this vehicle's terms (second start of the base fit):
+    CoG at 45 % of the wheelbase, 0.55 m high, slip stiffness 15 and cornering stiffness 8
+    times the static axle load."""
+    load = vehicle.mass * 9.81 / 2
+    prior = vehicle.default_prior()
+    th = np.array([0.45 * vehicle.wheelbase, 0.55, 15 * load, 15 * load, 8 * load, 8 * load])
+    lo = np.array([prior[n][0] for n in PARAM_NAMES])
+    hi = np.array([prior[n][1] for n in PARAM_NAMES])
+    return np.clip(th, lo + 0.02 * (hi - lo), hi - 0.02 * (hi - lo))
+
+
 def default_identify(fitter: Fitter, effects: tuple, z0, max_iter: int) -> FitResult:
     """MAP fit of θ (and the effects' parameters) with a Laplace covariance."""
     return fitter.fit(effects, z0, max_iter=max_iter)
@@ -137,6 +149,8 @@ def diagnose(
     num_draws: int = 400,
     single_iters: int = 12,
     final_iters: int = 30,
+    search_dt: float = 0.005,
+    final_dt: float = 0.0025,
     identify_fn: IdentifyFn | None = None,
     quiet: bool = True,
     plots: bool = True,
@@ -155,6 +169,8 @@ def diagnose(
         train_fraction: share of each window fitted; the rest is held out.
         num_draws: simulated null draws of the test.
         single_iters, final_iters: LM iteration caps for the search and the final fit.
+        search_dt, final_dt: RK4 steps, s, of the candidate search and of the base/final fits
+            (the test and the held-out comparison use the final step).
         identify_fn: `(fitter, effects, z0, max_iter) -> FitResult`; default MAP + Laplace.
         quiet: no progress lines.
         plots: write the figures (with `out_dir`).
@@ -177,8 +193,14 @@ def diagnose(
             f"windows: {windows.num_windows} × {windows.t.shape[1] * windows.dt:.1f} s, "
             f"channels {', '.join(windows.channels)}"
         )
-        fitter = Fitter(vehicle, windows.fit_data("train"))
-        base = identify(fitter, (), None, final_iters)
+        train = windows.fit_data("train")
+        coarse = Fitter(vehicle, train, dt=search_dt)
+        fitter = Fitter(vehicle, train, dt=final_dt)
+        # Base model from two starts (middle of the prior box, and a typical passenger car),
+        # searched with the coarse step, then polished with the fine one.
+        starts = [None, coarse.initial_z(typical_theta(vehicle))]
+        base_c = min((identify(coarse, (), z, final_iters) for z in starts), key=lambda f: f.chi2)
+        base = identify(fitter, (), base_c.z, final_iters)
         say(
             f"base fit: χ²/dof {base.chi2_dof:.3f} ({base.iterations} it, "
             f"{time.perf_counter() - t_start:.0f} s)"
@@ -191,17 +213,18 @@ def diagnose(
         loc = locate_mismatch(test0, res, ts, us, rate=rate)
         detected = test0.p_value < alpha
         say(f"misspecification p = {test0.p_value:.4f} -> {'detected' if detected else 'not detected'}")
-        fits: dict[tuple, FitResult] = {(): base}
+        # Search with the coarse step; every candidate warm-starts from the base fit.
+        fits: dict[tuple, FitResult] = {(): base_c}
         for cand in single_candidates():
-            fits[cand] = identify(fitter, cand, base.z, single_iters)
-        singles = [r for r in rank(fits, base) if len(r.effects) == 1]
+            fits[cand] = identify(coarse, cand, base_c.z, single_iters)
+        singles = [r for r in rank(fits, base_c) if len(r.effects) == 1]
         say("singles: " + ", ".join(f"{r.name} {r.score:.1f}" for r in singles[:5]))
         pairs = pair_candidates([r.effects[0] for r in singles], top=top_pairs)
         by_name = {r.effects[0]: r for r in singles}
         for pair in pairs:
             lead = max(pair, key=lambda e: by_name[e].score)
-            fits[pair] = identify(fitter, pair, fits[(lead,)].z, single_iters)
-        ranked = rank(fits, base)
+            fits[pair] = identify(coarse, pair, fits[(lead,)].z, single_iters)
+        ranked = rank(fits, base_c)
         chosen = choose(ranked, detected)
         if chosen:
             final = identify(fitter, chosen, fits[chosen].z, final_iters)
@@ -215,7 +238,7 @@ def diagnose(
         full = windows.fit_data("valid", truncate=False)
         pred0 = fitter.predict(base.z, (), full)
         pred1 = fitter.predict(final.z, chosen, full) if chosen else pred0
-        sep = separability(ranked, base)
+        sep = separability(ranked, base_c)
     fit_before, fit_after = _held_metrics(pred0, windows), _held_metrics(pred1, windows)
     top = ranked[0]
     second = ranked[1] if len(ranked) > 1 else None
@@ -280,7 +303,7 @@ def diagnose(
             "test": "max standardised low-band/high-band residual power ratio; null by simulated noise "
             f"through the linearised refit ({num_draws} draws)",
             "evidence": "BIC log Bayes factor vs 'none'; strong if > " + f"{STRONG:g}",
-            "solver_dt_s": fitter.dt,
+            "solver_dt_s": {"search": coarse.dt, "final": fitter.dt},
         },
         "seconds": time.perf_counter() - t_start,
     }

@@ -1,0 +1,369 @@
+"""Proof of mismatch discovery on recordings with concealed effects.
+
+Makes recordings in which one effect, two effects or none are concealed, WRITES THEM AS FILES
+(recording.csv, vehicle.json with noise_std; the truth in a separate truth.json that the
+diagnosis never reads), runs `vdsbi.discovery.diagnose` on the two files alone, and scores
+what it found against truth.json.
+
+Generator (documented so the ranges can be judged):
+  * vehicle: mass U[1200, 2000] kg, wheelbase U[2.5, 2.9] m, other constants of
+    `default_vehicle()`;
+  * θ: l_f U[0.4, 0.6]·L, h_cog U[0.35, 0.7] m, C_kappa U[8, 25] × static axle load,
+    C_alpha U[5, 15] × static axle load (per axle, independently);
+  * maneuver: `random_profile` (20 s, 200 Hz), initial speed U[12, 25] m/s; draws in which the
+    car slows below 4 m/s or a wheel exceeds 250 rad/s are redrawn;
+  * effects: each parameter from its effect's `typical` range; for ranges symmetric about 0
+    the magnitude is U[a/3, a] with a random sign (the lower third is excluded so the effect is
+    not vanishingly small), one-sided ranges U[low, high];
+  * sensor noise: additive white Gaussian, std ax, ay U[0.05, 0.15] m/s², yaw_rate
+    U[0.002, 0.006] rad/s, omega U[0.05, 0.15] rad/s, vx U[0.02, 0.08] m/s; vx recorded in half of
+    the recordings; the std is written to vehicle.json's noise_std;
+  * simulated with the simulator's default solver (RK4, 2.5 ms).
+
+Usage:
+    python experiments/concealed_effects.py [--quick] [--data DIR] [--out DIR] [--per-effect 3]
+
+Partial results are written after every recording; a restart skips finished recordings.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import traceback
+from pathlib import Path
+
+import jax
+import numpy as np
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from vdsbi.discovery import EFFECT_NAMES, diagnose  # noqa: E402
+from vdsbi.simulator import (  # noqa: E402
+    CHANNELS,
+    EFFECTS,
+    PARAM_NAMES,
+    VEHICLE_KEYS,
+    Vehicle,
+    default_vehicle,
+    random_profile,
+    simulate,
+)
+
+NOISE_RANGES = {
+    "ax": (0.05, 0.15),
+    "ay": (0.05, 0.15),
+    "yaw_rate": (0.002, 0.006),
+    "omega_front": (0.05, 0.15),
+    "omega_rear": (0.05, 0.15),
+    "vx": (0.02, 0.08),
+}
+
+
+def draw_effect(rng, name):
+    eff = EFFECTS[name]
+    out = {}
+    for p, (lo, hi) in zip(eff.param_names, eff.typical):
+        if lo < 0 < hi and abs(lo + hi) < 1e-12:
+            a = hi
+            out[p] = float(rng.uniform(a / 3, a) * rng.choice([-1, 1]))
+        else:
+            out[p] = float(rng.uniform(lo, hi))
+    return out
+
+
+def case_list(per_effect: int, clean: int, pairs: int, seed: int):
+    rng = np.random.default_rng(seed)
+    all_pairs = [(a, b) for i, a in enumerate(EFFECT_NAMES) for b in EFFECT_NAMES[i + 1 :]]
+    pair_idx = rng.choice(len(all_pairs), size=pairs, replace=False)
+    cases = []
+    rounds = max(per_effect, clean, pairs)
+    for r in range(rounds):
+        if r < clean:
+            cases.append(())
+        if r < per_effect:
+            cases += [(e,) for e in EFFECT_NAMES]
+        if r < pairs:
+            cases.append(all_pairs[pair_idx[r]])
+    for _ in range(rounds, clean):
+        cases.append(())
+    return cases
+
+
+def make_case(i: int, effects: tuple, seed: int, duration: float, folder: Path):
+    rng = np.random.default_rng([seed, i])
+    d = default_vehicle()
+    consts = {k: float(getattr(d, k)) for k in VEHICLE_KEYS}
+    consts["mass"] = float(rng.uniform(1200, 2000))
+    consts["wheelbase"] = float(rng.uniform(2.5, 2.9))
+    load = consts["mass"] * 9.81 / 2
+    L = consts["wheelbase"]
+    with_vx = bool(rng.random() < 0.5)
+    channels = [c for c in CHANNELS if c != "vx" or with_vx]
+    noise = {c: float(rng.uniform(*NOISE_RANGES[c])) for c in channels}
+    veh = Vehicle(**consts, noise_std=noise)
+    for attempt in range(50):  # noqa: B007
+        theta = np.array(
+            [
+                rng.uniform(0.4, 0.6) * L,
+                rng.uniform(0.35, 0.7),
+                rng.uniform(8, 25) * load,
+                rng.uniform(8, 25) * load,
+                rng.uniform(5, 15) * load,
+                rng.uniform(5, 15) * load,
+            ]
+        )
+        params = {e: draw_effect(rng, e) for e in effects}
+        key = jax.random.key(int(rng.integers(2**31)))
+        inputs = random_profile(key, duration)
+        v0 = float(rng.uniform(12, 25))
+        with jax.enable_x64(True):
+            ys, ok = simulate(theta, inputs, veh, v0=v0, effects=list(effects), effect_params=params)
+        if ok and np.all(np.isfinite(ys)) and ys[:, 5].min() > 4.0 and np.abs(ys[:, 3:5]).max() < 250:
+            break
+    else:
+        raise RuntimeError(f"case {i}: no valid draw")
+    ys = ys + rng.standard_normal(ys.shape) * np.array([noise.get(c, 0.0) for c in CHANNELS])
+    folder.mkdir(parents=True, exist_ok=True)
+    cols = {
+        "t": np.asarray(inputs.ts),
+        "steer": np.asarray(inputs.steer),
+        "torque_front": np.asarray(inputs.torque_front),
+        "torque_rear": np.asarray(inputs.torque_rear),
+    }
+    cols.update({c: ys[:, CHANNELS.index(c)] for c in channels})
+    pd.DataFrame(cols).to_csv(folder / "recording.csv", index=False, float_format="%.10g")
+    (folder / "vehicle.json").write_text(json.dumps(veh.to_dict(), indent=2))
+    truth = {
+        "effects": list(effects),
+        "params": params,
+        "theta": dict(zip(PARAM_NAMES, theta.tolist())),
+        "v0": v0,
+        "attempts": attempt + 1,
+    }
+    (folder / "truth.json").write_text(json.dumps(truth, indent=2))
+
+
+def score(truth: dict, rep: dict, seconds: float) -> dict:
+    t_eff = tuple(truth["effects"])
+    chosen = tuple(rep["chosen"])
+    top = rep["effects"][0]
+    mag = {}
+    for e in t_eff:
+        tv = np.array(list(truth["params"][e].values()))
+        est = rep["effect_params"].get(e)
+        if est is None:
+            mag[e] = None
+        else:
+            ev = np.array([est[k] for k in truth["params"][e]])
+            mag[e] = float(np.linalg.norm(ev - tv) / np.linalg.norm(tv))
+    before, after = rep["fit"]["before"], rep["fit"]["after"]
+    return {
+        "truth": list(t_eff),
+        "detected": rep["mismatch_detected"],
+        "p_value": rep["p_value"],
+        "p_value_after": rep["p_value_after"],
+        "chosen": list(chosen),
+        "top1": top["effects"],
+        "top1_correct": set(top["effects"]) == set(t_eff),
+        "named_correct": set(chosen) == set(t_eff),
+        "magnitude_rel_error": mag,
+        "truth_params": truth["params"],
+        "est_params": rep["effect_params"],
+        "heldout_chi2_before": {c: v["chi2_dof"] for c, v in before.items()},
+        "heldout_chi2_after": {c: v["chi2_dof"] for c, v in after.items()},
+        "heldout_nrmse_before": {c: v["nrmse"] for c, v in before.items()},
+        "heldout_nrmse_after": {c: v["nrmse"] for c, v in after.items()},
+        "max_chi2_after": max(v["chi2_dof"] for v in after.values()),
+        "mean_chi2_before": float(np.mean([v["chi2_dof"] for v in before.values()])),
+        "mean_chi2_after": float(np.mean([v["chi2_dof"] for v in after.values()])),
+        "theta_true": truth["theta"],
+        "theta_after": rep["theta"]["after"],
+        "separability": rep["separability"],
+        "seconds": seconds,
+    }
+
+
+def summarise(results: list[dict]) -> dict:
+    eff_cases = [r for r in results if r["truth"]]
+    clean = [r for r in results if not r["truth"]]
+    singles = [r for r in results if len(r["truth"]) == 1]
+    pairs = [r for r in results if len(r["truth"]) == 2]
+    lab = lambda e: "+".join(e) if e else "none"
+    labels = ["none", *EFFECT_NAMES]
+    conf: dict = {}
+    for r in results:
+        t = lab(r["truth"]) if len(r["truth"]) < 2 else "pair"
+        c = lab(r["chosen"]) if len(r["chosen"]) < 2 else "pair:" + lab(r["chosen"])
+        conf.setdefault(t, {}).setdefault(c, 0)
+        conf[t][c] += 1
+    per_effect = {}
+    for e in labels:
+        rs = [r for r in results if r["truth"] == ([] if e == "none" else [e])]
+        if not rs:
+            continue
+        mags = [r["magnitude_rel_error"].get(e) for r in rs if e != "none"]
+        per_effect[e] = {
+            "n": len(rs),
+            "detected": sum(r["detected"] for r in rs),
+            "named_correct": sum(r["named_correct"] for r in rs),
+            "top1_correct": sum(r["top1_correct"] for r in rs),
+            "magnitude_rel_error": mags,
+            "magnitude_within_25pct": sum(m is not None and m <= 0.25 for m in mags),
+            "heldout_mean_chi2_before": [round(r["mean_chi2_before"], 3) for r in rs],
+            "heldout_mean_chi2_after": [round(r["mean_chi2_after"], 3) for r in rs],
+            "heldout_max_chi2_after": [round(r["max_chi2_after"], 3) for r in rs],
+            "chosen": [lab(r["chosen"]) for r in rs],
+            "seconds": [round(r["seconds"], 1) for r in rs],
+        }
+    frac = lambda a, b: (a / b) if b else None
+    return {
+        "n_recordings": len(results),
+        "detection_rate": frac(sum(r["detected"] for r in eff_cases), len(eff_cases)),
+        "false_alarms": f"{sum(r['detected'] for r in clean)} of {len(clean)}",
+        "false_alarm_rate": frac(sum(r["detected"] for r in clean), len(clean)),
+        "top1_accuracy_single": frac(sum(r["top1_correct"] for r in singles), len(singles)),
+        "named_accuracy_single": frac(sum(r["named_correct"] for r in singles), len(singles)),
+        "pairs_both_named": f"{sum(r['named_correct'] for r in pairs)} of {len(pairs)}",
+        "pairs": [{"truth": r["truth"], "chosen": r["chosen"], "top1": r["top1"]} for r in pairs],
+        "magnitude_within_25pct": frac(
+            sum(m is not None and m <= 0.25 for r in eff_cases for m in r["magnitude_rel_error"].values()),
+            sum(len(r["magnitude_rel_error"]) for r in eff_cases),
+        ),
+        "heldout_chi2_after_le_1.1_all_channels": frac(
+            sum(r["max_chi2_after"] <= 1.1 for r in eff_cases), len(eff_cases)
+        ),
+        "heldout_mean_chi2_before_median": float(np.median([r["mean_chi2_before"] for r in eff_cases]))
+        if eff_cases
+        else None,
+        "heldout_mean_chi2_after_median": float(np.median([r["mean_chi2_after"] for r in eff_cases]))
+        if eff_cases
+        else None,
+        "seconds_median": float(np.median([r["seconds"] for r in results])),
+        "seconds_max": float(np.max([r["seconds"] for r in results])),
+        "within_5_min": f"{sum(r['seconds'] <= 300 for r in results)} of {len(results)}",
+        "confusion_matrix": conf,
+        "per_effect": per_effect,
+    }
+
+
+def markdown(summary: dict, targets: dict) -> str:
+    L = ["# Concealed effects: mismatch discovery on recordings with known hidden physics", ""]
+    L.append("Generated by `experiments/concealed_effects.py` (see its docstring for the generator).")
+    L.append("")
+    L.append("| figure | measured | target |")
+    L.append("|---|---|---|")
+    for k, tgt in targets.items():
+        L.append(f"| {k} | {summary.get(k)} | {tgt} |")
+    L += ["", "## Per effect", ""]
+    L.append(
+        "| truth | n | detected | named | top-1 | magnitude rel. error | held-out mean χ²/dof before → after | max after | chosen | s |"
+    )
+    L.append("|---|---|---|---|---|---|---|---|---|---|")
+    for e, d in summary["per_effect"].items():
+        mags = ", ".join("—" if m is None else f"{m:.2f}" for m in d["magnitude_rel_error"]) or "—"
+        chi = ", ".join(
+            f"{a}→{b}" for a, b in zip(d["heldout_mean_chi2_before"], d["heldout_mean_chi2_after"])
+        )
+        L.append(
+            f"| {e} | {d['n']} | {d['detected']} | {d['named_correct']} | {d['top1_correct']} | {mags} | "
+            f"{chi} | {', '.join(map(str, d['heldout_max_chi2_after']))} | {', '.join(d['chosen'])} | "
+            f"{', '.join(map(str, d['seconds']))} |"
+        )
+    L += ["", "## Pairs", ""]
+    for p in summary["pairs"]:
+        L.append(
+            f"- truth {'+'.join(p['truth'])}: chosen {'+'.join(p['chosen']) or 'none'}, top-1 {'+'.join(p['top1']) or 'none'}"
+        )
+    L += ["", "## Confusion matrix (truth → chosen)", ""]
+    for t, row in summary["confusion_matrix"].items():
+        L.append(f"- {t}: " + ", ".join(f"{c} ×{n}" for c, n in sorted(row.items(), key=lambda x: -x[1])))
+    return "\n".join(L) + "\n"
+
+
+TARGETS = {
+    "detection_rate": "≥ 0.95",
+    "false_alarms": "≤ 1 of 4 clean",
+    "top1_accuracy_single": "≥ 0.90",
+    "named_accuracy_single": "(chosen = truth)",
+    "pairs_both_named": "≥ 2 of 3",
+    "magnitude_within_25pct": "all",
+    "heldout_chi2_after_le_1.1_all_channels": "all",
+    "heldout_mean_chi2_before_median": "",
+    "heldout_mean_chi2_after_median": "≤ 1.1",
+    "seconds_median": "≤ 300",
+    "seconds_max": "≤ 300",
+    "within_5_min": "all",
+}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="2 short recordings (clean, sensor_bias)")
+    ap.add_argument("--data", default="/tmp/vdsbi_concealed", help="where recordings are written")
+    ap.add_argument("--out", default=str(ROOT / "experiments" / "results"), help="results folder")
+    ap.add_argument("--per-effect", type=int, default=3)
+    ap.add_argument("--clean", type=int, default=6)
+    ap.add_argument("--pairs", type=int, default=3)
+    ap.add_argument("--seed", type=int, default=20240601)
+    ap.add_argument("--limit", type=int, default=None, help="stop after this many recordings")
+    args = ap.parse_args(argv)
+    jax.config.update("jax_compilation_cache_dir", str(Path(args.data).parent / "vdsbi_jax_cache"))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 2.0)
+    data = Path(args.data) / ("quick" if args.quick else "full")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    if args.quick:
+        cases, duration, kw, name = [(), ("sensor_bias",)], 8.0, {"num_draws": 100}, "concealed_effects_quick"
+    else:
+        cases = case_list(args.per_effect, args.clean, args.pairs, args.seed)
+        duration, kw, name = 20.0, {}, "concealed_effects"
+    if args.limit:
+        cases = cases[: args.limit]
+    results = []
+    for i, effects in enumerate(cases):
+        folder = data / f"case_{i:03d}_{'+'.join(effects) or 'none'}"
+        done = folder / "result.json"
+        if done.exists():
+            results.append(json.loads(done.read_text()))
+            continue
+        if not (folder / "recording.csv").exists():
+            make_case(i, effects, args.seed, duration, folder)
+        t0 = time.perf_counter()
+        try:
+            res = diagnose(folder / "recording.csv", folder / "vehicle.json", plots=False, **kw)
+        except Exception:
+            traceback.print_exc()
+            continue
+        secs = time.perf_counter() - t0
+        (folder / "report.json").write_text(json.dumps(res.report, indent=1, default=float))
+        truth = json.loads((folder / "truth.json").read_text())  # read only to score
+        r = score(truth, res.report, secs)
+        r["case"] = folder.name
+        done.write_text(json.dumps(r, indent=1, default=float))
+        results.append(r)
+        print(
+            f"[{i + 1}/{len(cases)}] {folder.name}: detected={r['detected']} p={r['p_value']:.3g} "
+            f"chosen={'+'.join(r['chosen']) or 'none'} mag={r['magnitude_rel_error']} "
+            f"chi2 {r['mean_chi2_before']:.2f}->{r['mean_chi2_after']:.2f} ({secs:.0f} s)",
+            flush=True,
+        )
+        summary = summarise(results)
+        summary["complete"] = len(results) == len(cases)
+        summary["cases_planned"] = len(cases)
+        (out / f"{name}.json").write_text(
+            json.dumps({"summary": summary, "cases": results}, indent=1, default=float)
+        )
+        (out / f"{name}.md").write_text(markdown(summary, TARGETS))
+    if results:
+        s = summarise(results)
+        print(json.dumps({k: s[k] for k in TARGETS if k in s}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
