@@ -40,11 +40,21 @@ def markdown(rows: dict) -> str:
         out.append(f"- identified on: {r.get('segment')}")
         out.append(f"- estimated noise std: {r['noise_std_estimate']}")
         out.append(f"- kinematic check, slope of d(vx)/dt vs ax: {r['kinematic_slopes']}")
+        slope = r["kinematic_slopes"].get("dvx/dt~ax")
+        if slope is not None and not 0.8 <= slope <= 1.2:
+            out.append(
+                f"- **warning**: d(vx)/dt ≈ {slope:.2f}·ax, not 1: the file's time base (t = index × 5 ms) is "
+                f"likely off by ~{1 / slope:.1f}×; the posterior below is from a mis-timed recording"
+            )
         if r.get("error"):
             out += [f"- **not identified**: {r['error']}", ""]
             continue
         out.append(f"- budget: {r['budget']}, wall time {r['wall_s']:.0f} s")
-        out.append(f"- posterior-predictive 90 % band coverage: {r['ppc']}")
+        out.append(f"- posterior-predictive 90 % band coverage (fraction of samples inside): {r['ppc']}")
+        out.append(
+            f"- posterior draws that simulated successfully for the band: {r.get('ppc_draws_simulated')} of 100"
+        )
+        out.append(f"- simulations used per round (rest failed or non-finite): {r.get('used_per_round')}")
         out += [
             "",
             "| param | mean | std | 5 % | 95 % | prior | source lab |",
@@ -67,12 +77,17 @@ def main() -> None:
     ap.add_argument("--rounds", type=int)
     ap.add_argument("--sims", type=int)
     ap.add_argument("--max-duration", type=float)
+    ap.add_argument("--markdown-only", action="store_true", help="rewrite the .md from the .json")
     args = ap.parse_args()
     rounds = args.rounds or 2
     sims = args.sims or (200 if args.quick else 1000)
     max_dur = args.max_duration or (8.0 if args.quick else 20.0)
     stem = "real_vw_gti_quick" if args.quick else "real_vw_gti"
     RESULTS.mkdir(exist_ok=True)
+    if args.markdown_only:
+        rows = json.loads((RESULTS / f"{stem}.json").read_text())
+        (RESULTS / f"{stem}.md").write_text(markdown(rows))
+        return
     rows: dict = {}
     for name in DRIVES:
         rec, veh = load_drive(REAL / name / "recording.csv", REAL / name / "vehicle.json")
@@ -111,6 +126,8 @@ def main() -> None:
                 parameters=s["parameters"],
                 ppc={k: round(v, 3) for k, v in s["ppc"]["fraction_inside_90pct_band"].items()},
                 wall_s=time.perf_counter() - t0,
+                used_per_round=[h["num_used"] for h in s["rounds"]],
+                ppc_draws_simulated=s["ppc"]["draws"],
             )
             for f in ("checkpoint.npz", "estimator.npz"):  # large binaries stay out of git
                 (out / f).unlink(missing_ok=True)

@@ -449,7 +449,10 @@ def identify(
     inside = (obs >= ppc["q05"]) & (obs <= ppc["q95"])
     summary["ppc"] = {
         "draws": int(ppc["n"]),
-        "fraction_inside_90pct_band": {c: float(inside[:, i].mean()) for i, c in enumerate(prob.channels)},
+        # None when no posterior draw simulated successfully (no band to compare with).
+        "fraction_inside_90pct_band": {
+            c: (float(inside[:, i].mean()) if ppc["n"] else None) for i, c in enumerate(prob.channels)
+        },
     }
     result = IdentifyResult(posterior, samples, summary, out)
     if out is not None:
