@@ -4,6 +4,7 @@ from typing import Any
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ._embeddings import AbstractEmbedding, register_embedding
@@ -12,7 +13,8 @@ from ._embeddings import AbstractEmbedding, register_embedding
 @register_embedding
 class CNNEmbedding(AbstractEmbedding):
     """Strided, dilated 1D convolutions, then adaptive average pooling into `num_pool`
-    windows (coarse timing survives, any length ≥ `num_pool`·stride works), then an MLP.
+    windows (coarse timing survives, any length ≥ `num_pool`·stride works), concatenated with
+    per-channel global mean and log-std, then an MLP.
 
     Input: one standardised trajectory of shape (T, in_channels), channels last.
 
@@ -60,8 +62,16 @@ class CNNEmbedding(AbstractEmbedding):
             )
             for i, (k, s, d) in enumerate(layout)
         )
+        # Head input: pooled conv features plus each input channel's global mean and log-std
+        # (global statistics pooling), so level differences such as ω_f vs ω_r slip need not
+        # be learned through the convolutions.
         self.head = eqx.nn.MLP(
-            self.width * self.num_pool, self.out_dim, 2 * self.out_dim, 1, activation=jax.nn.gelu, key=keys[4]
+            self.width * self.num_pool + 2 * self.in_channels,
+            self.out_dim,
+            2 * self.out_dim,
+            1,
+            activation=jax.nn.gelu,
+            key=keys[4],
         )
 
     def __call__(self, x: Float[Array, "T C"]) -> Float[Array, " out_dim"]:
@@ -69,12 +79,13 @@ class CNNEmbedding(AbstractEmbedding):
             raise ValueError(f"CNNEmbedding expects (T, {self.in_channels}), got {x.shape}")
         t = (x.shape[0] // self.downsample) * self.downsample
         h = x[:t].reshape(t // self.downsample, self.downsample, -1).mean(1).T  # (C, T')
+        glob = jnp.concatenate([h.mean(1), 0.5 * jnp.log(h.var(1) + 1e-6)])
         for conv in self.convs:
             h = jax.nn.gelu(conv(h))
         # Adaptive average pooling into num_pool equal windows.
         n = (h.shape[1] // self.num_pool) * self.num_pool
         h = h[:, :n].reshape(h.shape[0], self.num_pool, -1).mean(-1)
-        return self.head(h.reshape(-1))
+        return self.head(jnp.concatenate([h.reshape(-1), glob]))
 
     def spec(self) -> dict[str, Any]:
         return {
