@@ -72,6 +72,21 @@ def _excitation_score(rec) -> float:
     return float(np.std(rec.steer) / 0.005 + np.std(rec.torque_front + rec.torque_rear) / 100.0)
 
 
+def _quiet_start(rec, a: float, b: float, search: float = 3.0) -> float:
+    """Move the window start to where the car is laterally near rest.
+
+    The simulator starts with V_y = r = 0 (the contract: "assumed at rest laterally"), so a
+    window that begins mid-corner starts with a built-in mismatch. Within the first
+    `search` s, take the first sample with small yaw rate and steer if there is one.
+    """
+    if "yaw_rate" not in rec.channels:
+        return a
+    t = rec.t
+    sel = (t >= a) & (t <= min(a + search, b - 5.0))
+    ok = sel & (np.abs(rec.channels["yaw_rate"]) < 0.03) & (np.abs(rec.steer) < 0.02)
+    return float(t[np.argmax(ok)]) if ok.any() else a
+
+
 def choose_segment(
     rec, vehicle, *, segment: tuple[float, float] | None = None, max_duration: float = 20.0
 ) -> tuple[Any, dict[str, Any]]:
@@ -117,6 +132,7 @@ def choose_segment(
             if score > best_score:
                 best, best_score = (float(a), float(b)), score
     a, b = best
+    a = _quiet_start(rec, a, b)
     how = (
         "whole recording"
         if (a <= rec.t[0] + 1e-6 and b >= rec.t[-1] - 1e-6)
