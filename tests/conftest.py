@@ -29,3 +29,13 @@ def tree_allclose(a, b, rtol=1e-5, atol=1e-8) -> bool:
 
 
 __all__ = ["tree_allclose", "jnp"]
+
+
+def pytest_configure(config):
+    # Share compiled XLA programs between the xdist workers and between runs: compilation,
+    # not execution, dominates this suite's wall time.
+    import os
+
+    cache = os.path.join(os.path.dirname(__file__), "..", ".jax_cache")
+    jax.config.update("jax_compilation_cache_dir", os.path.abspath(cache))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
