@@ -212,6 +212,8 @@ class DesignProblem(eqx.Module):
         target: index into PARAM_NAMES of the parameter whose bound is minimised, or −1 for
             D-optimal (maximise log det F).
         penalty_weight: weight of the squared limit violations (relative to their limit).
+        margin: the penalty acts on ay and speed limits tightened by this fraction; feasibility
+            is judged on the true limits.
         floor_fraction: relative-noise floor.
         solver: integration settings used while optimising.
     """
@@ -224,6 +226,7 @@ class DesignProblem(eqx.Module):
     additive: Float[Array, " C"]
     target: int = eqx.field(static=True, default=-1)
     penalty_weight: float = eqx.field(static=True, default=1e3)
+    margin: float = eqx.field(static=True, default=0.02)
     floor_fraction: float = eqx.field(static=True, default=0.1)
     solver: Solver = Solver(dt=0.005)
 
@@ -260,9 +263,14 @@ class DesignProblem(eqx.Module):
         ay_ex = jnp.max(jnp.abs(ys[:, _AY])) / ay_max - 1.0
         vx = ys[:, _VX]
         sp_ex = jnp.maximum(jnp.max(vx) / lim.v_max - 1.0, 1.0 - jnp.min(vx) / lim.v_min)
-        # Soft violation measure: mean squared relative excess over the samples.
-        pen = jnp.mean(jax.nn.relu(jnp.abs(ys[:, _AY]) / ay_max - 1.0) ** 2)
-        pen = pen + jnp.mean(jax.nn.relu(vx / lim.v_max - 1.0) ** 2 + jax.nn.relu(1.0 - vx / lim.v_min) ** 2)
+        # Soft violation measure: mean squared relative excess over the samples, against limits
+        # tightened by `margin` so that iterates hovering at the penalty's edge stay feasible.
+        m = self.margin
+        pen = jnp.mean(jax.nn.relu(jnp.abs(ys[:, _AY]) / (ay_max * (1 - m)) - 1.0) ** 2)
+        pen = pen + jnp.mean(
+            jax.nn.relu(vx / (lim.v_max * (1 - m)) - 1.0) ** 2
+            + jax.nn.relu(1.0 - vx / (lim.v_min * (1 + m))) ** 2
+        )
         value = info - self.penalty_weight * pen
         value = jnp.where(ok & jnp.isfinite(value), value, -jnp.inf)
         return Objective(value, info, pen, ay_ex, sp_ex, ok)
@@ -325,7 +333,7 @@ def design(
     learning_rate: float = 0.05,
     callback=None,
 ) -> DesignResult:
-    """Gradient ascent (Adam) on the penalised information objective.
+    """Gradient ascent (Adam, cosine-decayed step size) on the penalised information objective.
 
     One jitted step (value, gradient and update inside). Returns the best iterate that meets
     every limit exactly; raises ValueError if the initial maneuver does not.
@@ -334,7 +342,7 @@ def design(
         problem: the design problem.
         initial: starting maneuver.
         num_steps: optimiser steps.
-        learning_rate: Adam step size (the parameters are O(1)).
+        learning_rate: initial Adam step size (the parameters are O(1)); decays to a tenth.
         callback: optional f(step, Objective) called after every evaluation.
     """
     # Strong-typed float leaves: a weak-typed start would make the second step recompile.
@@ -346,7 +354,9 @@ def design(
     hist = {"value": [], "information": [], "penalty": [], "feasible": []}
     for i in range(num_steps + 1):
         prev = man
-        man, state, obj = _step(problem, man, state, lr)
+        # Cosine decay to a tenth of the step size: settles the iterate against the limits.
+        decay = 0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * min(i, num_steps) / max(num_steps, 1)))
+        man, state, obj = _step(problem, man, state, lr * decay)
         # `obj` was evaluated at `prev`.
         feas = feasible(obj)
         if i == 0 and not feas:
