@@ -68,8 +68,8 @@ class CNNEmbedding(AbstractEmbedding):
         self.head = eqx.nn.MLP(
             self.width * self.num_pool + 2 * self.in_channels,
             self.out_dim,
-            2 * self.out_dim,
-            1,
+            128,
+            2,
             activation=jax.nn.gelu,
             key=keys[4],
         )
