@@ -212,9 +212,10 @@ def run(args) -> int:
             "limits_check": chk,
         }
         rec = _recording(model, th, designed, v0_design)
+        described = res.maneuver.describe(limits)
     info = {
         "target": args.target,
-        "maneuver": res.maneuver.describe(limits),
+        "maneuver": described,
         "limits": {k: getattr(limits, k) for k in limits.__dataclass_fields__},
         "steps": args.steps,
         "best_step": res.best_step,
