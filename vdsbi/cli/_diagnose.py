@@ -22,17 +22,30 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--alpha", type=float, default=0.05, help="level of the misspecification test")
     p.add_argument("--seed", type=int, default=0, help="seed of the test's simulated null")
     p.add_argument("--top-pairs", type=int, default=3, help="fit pairs among this many best singles")
+    p.add_argument("--effects", default=None, help="comma-separated effects to consider (default all)")
     p.add_argument("--max-windows", type=int, default=3, help="most windows (≤ 20 s each) fitted")
+    p.add_argument(
+        "--final-dt",
+        type=float,
+        default=0.0025,
+        help="RK4 step, s, of the base/final fits and the test (default 0.0025; the search uses 0.005)",
+    )
     p.add_argument("--no-plots", action="store_true", help="skip the figures")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
 
 def run(args) -> int:
-    from ..discovery import diagnose
-    from ..io import load_drive
+    from ..discovery import EFFECT_NAMES, diagnose
+    from ..io import InputError, load_drive
     from ._output import output_dir
 
+    if args.effects is not None:
+        bad = [e for e in args.effects.split(",") if e.strip() not in EFFECT_NAMES]
+        if bad:
+            raise InputError(
+                "--effects", bad[0], f"unknown effect; expected some of {', '.join(EFFECT_NAMES)}"
+            )
     rec, vehicle = load_drive(args.recording, args.vehicle)
     with output_dir(args.out, overwrite=args.overwrite) as d:
         res = diagnose(
@@ -42,7 +55,9 @@ def run(args) -> int:
             seed=args.seed,
             alpha=args.alpha,
             top_pairs=args.top_pairs,
+            candidates=None if args.effects is None else [e.strip() for e in args.effects.split(",")],
             max_windows=args.max_windows,
+            final_dt=args.final_dt,
             quiet=args.quiet,
             plots=not args.no_plots,
         )

@@ -29,7 +29,7 @@ from ..simulator import EFFECTS, PARAM_NAMES, Vehicle
 from ..simulator._vehicle import CHANNELS
 from ._candidates import label, pair_candidates, single_candidates
 from ._data import Windows, make_windows
-from ._fit import EFFECT_NAMES, FitResult, Fitter
+from ._fit import EFFECT_BOUNDS, EFFECT_NAMES, FitResult, Fitter
 from ._rank import STRONG, Ranked, choose, rank, separability
 
 IdentifyFn = Callable[[Fitter, tuple, "np.ndarray | None", int], FitResult]
@@ -131,6 +131,21 @@ def _effect_rows(ranked: Sequence[Ranked]) -> list[dict]:
     ]
 
 
+def _at_bounds(fit: FitResult, fitter: Fitter, frac: float = 0.01) -> list[str]:
+    """Names of fitted values within `frac` of their box's edge (the data pushed them there:
+    a sign that they absorb something the model lacks)."""
+    out = []
+    lo, hi = np.asarray(fitter.space.theta_lo), np.asarray(fitter.space.theta_hi)
+    for n, v, a, b in zip(PARAM_NAMES, fit.theta, lo, hi):
+        if min(v - a, b - v) < frac * (b - a):
+            out.append(n)
+    for e, d in fit.effect_params.items():
+        for (k, v), (a, b) in zip(d.items(), EFFECT_BOUNDS[e]):
+            if min(v - a, b - v) < frac * (b - a):
+                out.append(f"{e}.{k}")
+    return out
+
+
 def _theta_dict(x) -> dict:
     return {n: float(v) for n, v in zip(PARAM_NAMES, x)}
 
@@ -143,12 +158,13 @@ def diagnose(
     seed: int = 0,
     alpha: float = 0.05,
     top_pairs: int = 3,
+    candidates: Sequence[str] | None = None,
     max_window: float = 20.0,
     max_windows: int = 3,
     train_fraction: float = 0.7,
     num_draws: int = 400,
-    single_iters: int = 12,
-    final_iters: int = 30,
+    single_iters: int = 8,
+    final_iters: int = 20,
     search_dt: float = 0.005,
     final_dt: float = 0.0025,
     identify_fn: IdentifyFn | None = None,
@@ -165,6 +181,7 @@ def diagnose(
         seed: seed of the simulated null of the misspecification test.
         alpha: level of the misspecification test.
         top_pairs: pairs are fitted among this many best single effects.
+        candidates: effects to consider (default: all ten).
         max_window, max_windows: windows cut from the usable stretches (s, count).
         train_fraction: share of each window fitted; the rest is held out.
         num_draws: simulated null draws of the test.
@@ -200,7 +217,7 @@ def diagnose(
         # searched with the coarse step, then polished with the fine one.
         starts = [None, coarse.initial_z(typical_theta(vehicle))]
         base_c = min((identify(coarse, (), z, final_iters) for z in starts), key=lambda f: f.chi2)
-        base = identify(fitter, (), base_c.z, final_iters)
+        base = identify(fitter, (), base_c.z, max(4, final_iters // 2))
         say(
             f"base fit: χ²/dof {base.chi2_dof:.3f} ({base.iterations} it, "
             f"{time.perf_counter() - t_start:.0f} s)"
@@ -215,7 +232,11 @@ def diagnose(
         say(f"misspecification p = {test0.p_value:.4f} -> {'detected' if detected else 'not detected'}")
         # Search with the coarse step; every candidate warm-starts from the base fit.
         fits: dict[tuple, FitResult] = {(): base_c}
-        for cand in single_candidates():
+        allowed = set(EFFECT_NAMES if candidates is None else candidates)
+        unknown = allowed - set(EFFECT_NAMES)
+        if unknown:
+            raise ValueError(f"candidates: unknown effect(s) {sorted(unknown)} (known: {EFFECT_NAMES})")
+        for cand in [c for c in single_candidates() if c[0] in allowed]:
             fits[cand] = identify(coarse, cand, base_c.z, single_iters)
         singles = [r for r in rank(fits, base_c) if len(r.effects) == 1]
         say("singles: " + ", ".join(f"{r.name} {r.score:.1f}" for r in singles[:5]))
@@ -225,8 +246,22 @@ def diagnose(
             lead = max(pair, key=lambda e: by_name[e].score)
             fits[pair] = identify(coarse, pair, fits[(lead,)].z, single_iters)
         ranked = rank(fits, base_c)
-        chosen = choose(ranked, detected)
-        if chosen:
+        polished: dict[tuple, FitResult] = {(): base}
+        if detected and len(ranked[0].effects) == 2 and ranked[0].score >= STRONG:
+            # A pair wins the search: the search caps iterations and a pair starts where its
+            # lead single stopped, so polish the pair and both members at the fine step with
+            # the same budget before deciding between them.
+            pair = ranked[0].effects
+            for cand in [pair, (pair[0],), (pair[1],)]:
+                polished[cand] = identify(fitter, cand, fits[cand].z, final_iters)
+            decision = rank(polished, base)
+            chosen = choose(decision, detected)
+            say("pair check: " + ", ".join(f"{r.name} {r.score:.1f}" for r in decision))
+        else:
+            chosen = choose(ranked, detected)
+        if chosen in polished:
+            final = polished[chosen]
+        elif chosen:
             final = identify(fitter, chosen, fits[chosen].z, final_iters)
         else:
             final = base
@@ -240,6 +275,7 @@ def diagnose(
         pred1 = fitter.predict(final.z, chosen, full) if chosen else pred0
         sep = separability(ranked, base_c)
     fit_before, fit_after = _held_metrics(pred0, windows), _held_metrics(pred1, windows)
+    at_bounds = _at_bounds(final, fitter)
     top = ranked[0]
     second = ranked[1] if len(ranked) > 1 else None
     report = {
@@ -274,12 +310,14 @@ def diagnose(
         "separability": sep,
         "pairs_fitted": [label(p) for p in pairs],
         "pairs_skipped": "pairs not among the top "
-        f"{top_pairs} single effects ({45 - len(pairs)} of 45) were not fitted",
+        f"{top_pairs} single effects ({45 - len(pairs)} of 45) were not fitted"
+        + ("" if candidates is None else f"; only {sorted(allowed)} were considered"),
         "fit": {"before": fit_before, "after": fit_after},
         "fit_train_chi2_dof": {"before": base.chi2_dof, "after": final.chi2_dof},
         "theta": {"before": _theta_dict(base.theta), "after": _theta_dict(final.theta)},
         "theta_std": {"before": _theta_dict(base.theta_std), "after": _theta_dict(final.theta_std)},
         "v0": {"before": base.v0.tolist(), "after": final.v0.tolist()},
+        "at_bounds": at_bounds,
         "effect_params": final.effect_params,
         "effect_params_std": final.effect_std,
         "noise": {

@@ -343,7 +343,7 @@ class Fitter:
         z0: np.ndarray | None = None,
         *,
         max_iter: int = 30,
-        tol: float = 1e-7,
+        tol: float = 1e-6,
         fix_theta: bool = False,
     ) -> FitResult:
         """Levenberg–Marquardt on ½|r|² + ½ Σ prec·z² over the free parameters.

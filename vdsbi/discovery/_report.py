@@ -74,7 +74,14 @@ def markdown(rep: dict) -> str:
         L.append(
             f"| {ch} | {b['nrmse']:.4f} | {a['nrmse']:.4f} | {b['chi2_dof']:.3f} | {a['chi2_dof']:.3f} |"
         )
-    L += ["", "## Parameters", "", "| θ | before | after |", "|---|---|---|"]
+    L += ["", "## Parameters", ""]
+    if rep.get("at_bounds"):
+        L.append(
+            f"At the edge of their range after the fix: {', '.join(rep['at_bounds'])} — they are "
+            "probably absorbing something the model lacks; treat their values with suspicion."
+        )
+        L.append("")
+    L += ["| θ | before | after |", "|---|---|---|"]
     for k, v in rep["theta"]["before"].items():
         sb, sa = rep["theta_std"]["before"][k], rep["theta_std"]["after"][k]
         L.append(f"| {k} | {v:.5g} ± {sb:.2g} | {rep['theta']['after'][k]:.5g} ± {sa:.2g} |")
