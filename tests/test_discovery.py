@@ -101,6 +101,12 @@ def test_cli_diagnose(quick, tmp_path):
             "--out",
             str(out),
             "--quiet",
+            "--final-dt",
+            "0.005",
+            "--effects",
+            "sensor_bias,road_grade",
+            "--top-pairs",
+            "0",
         ]
     )
     assert code == 0
