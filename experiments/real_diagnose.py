@@ -80,6 +80,10 @@ def markdown(rows: list[dict]) -> str:
             f"- located: channels {loc['channels']}, bands {loc['bands_hz']}, {len(loc['windows'])} windows"
         )
         L.append(f"- chosen: **{', '.join(r['chosen']) or 'none'}**")
+        chi_b = sum(d["before"]["chi2_dof"] for d in r["heldout"].values()) / len(r["heldout"])
+        chi_a = sum(d["after"]["chi2_dof"] for d in r["heldout"].values()) / len(r["heldout"])
+        verdict = "improves" if chi_a < chi_b else "does NOT improve (the fix absorbs some other mismatch)"
+        L.append(f"- held-out mean χ²/dof {chi_b:.4g} → {chi_a:.4g}: the fix {verdict}")
         L.append("- ranking (log Bayes factor vs none, BIC):")
         for e in r["ranking"]:
             ps = "; ".join(

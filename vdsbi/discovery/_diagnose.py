@@ -276,6 +276,8 @@ def diagnose(
         sep = separability(ranked, base_c)
     fit_before, fit_after = _held_metrics(pred0, windows), _held_metrics(pred1, windows)
     at_bounds = _at_bounds(final, fitter)
+    chi_b = float(np.mean([v["chi2_dof"] for v in fit_before.values()]))
+    chi_a = float(np.mean([v["chi2_dof"] for v in fit_after.values()]))
     top = ranked[0]
     second = ranked[1] if len(ranked) > 1 else None
     report = {
@@ -313,6 +315,9 @@ def diagnose(
         f"{top_pairs} single effects ({45 - len(pairs)} of 45) were not fitted"
         + ("" if candidates is None else f"; only {sorted(allowed)} were considered"),
         "fit": {"before": fit_before, "after": fit_after},
+        # Validation: does the chosen fix also improve the held-out part (mean χ²/dof over
+        # channels)? If not, the effect is absorbing some other mismatch on the fitted part.
+        "held_out_improved": bool(chi_a < chi_b) if chosen else None,
         "fit_train_chi2_dof": {"before": base.chi2_dof, "after": final.chi2_dof},
         "theta": {"before": _theta_dict(base.theta), "after": _theta_dict(final.theta)},
         "theta_std": {"before": _theta_dict(base.theta_std), "after": _theta_dict(final.theta_std)},

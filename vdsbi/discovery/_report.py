@@ -67,6 +67,12 @@ def markdown(rep: dict) -> str:
         for p in g["pairs"]:
             L.append(f"- {p['a']} vs {p['b']}: {p['verdict']}")
     L += ["", "## Held-out fit (last part of each window, not used for fitting)", ""]
+    if rep.get("held_out_improved") is False:
+        L.append(
+            "**The chosen effect does not improve the held-out fit**: on the fitted part it is "
+            "absorbing some other mismatch; do not take it as the missing physics."
+        )
+        L.append("")
     L.append("| channel | NRMSE before | NRMSE after | χ²/dof before | χ²/dof after |")
     L.append("|---|---|---|---|---|")
     for ch, b in rep["fit"]["before"].items():
