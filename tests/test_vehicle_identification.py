@@ -23,11 +23,13 @@ def test_cnn_embedding_any_length_and_reconstructable(getkey):
 
 
 def test_cnn_embedding_is_sensitive_to_timing(getkey):
-    """Adaptive pooling keeps coarse timing: a pulse early vs late gives different features."""
+    """Adaptive pooling keeps coarse timing: a pulse early vs late gives different features
+    (far beyond float32 rounding), though its global mean and std are the same."""
     emb = CNNEmbedding(getkey(), in_channels=1, out_dim=8)
-    early = jnp.zeros((800, 1)).at[50:100].set(1.0)
-    late = jnp.zeros((800, 1)).at[700:750].set(1.0)
-    assert float(jnp.abs(emb(early) - emb(late)).max()) > 1e-4
+    early = jnp.zeros((800, 1)).at[50:100].set(5.0)
+    late = jnp.zeros((800, 1)).at[700:750].set(5.0)
+    scale = float(jnp.abs(emb(early)).max())
+    assert float(jnp.abs(emb(early) - emb(late)).max()) > 1e-3 * scale
 
 
 def test_summary_statistics_properties(getkey):
