@@ -1,6 +1,11 @@
 """Diagnostics for posterior estimates."""
 
 from ._c2st import c2st as c2st
+from ._calibration import (
+    expected_coverage as expected_coverage,
+    sbc_ks_pvalues as sbc_ks_pvalues,
+    sbc_ranks as sbc_ranks,
+)
 from ._design import (
     DesignProblem as DesignProblem,
     DesignResult as DesignResult,
