@@ -45,17 +45,22 @@ def make_recording(out: Path, *, duration: float, seed: int) -> dict:
     )
 
     veh = default_vehicle()
-    inp = random_profile(jax.random.key(seed), duration=duration)
-    ys, ok = simulate(
-        theta_from_dict(SEED_TRUE_THETA),
-        inp,
-        veh,
-        v0=15.0,
-        effects=list(CONCEALED),
-        effect_params=CONCEALED,
-    )
-    if not ok:
-        raise RuntimeError("demo: the simulation of the demo drive failed")
+    # A random maneuver can brake the car to a stop (the model is not valid at standstill):
+    # draw maneuvers until one keeps it rolling, deterministically from `seed`.
+    for attempt in range(50):
+        inp = random_profile(jax.random.fold_in(jax.random.key(seed), attempt), duration=duration)
+        ys, ok = simulate(
+            theta_from_dict(SEED_TRUE_THETA),
+            inp,
+            veh,
+            v0=15.0,
+            effects=list(CONCEALED),
+            effect_params=CONCEALED,
+        )
+        if ok and float(np.min(np.asarray(ys)[:, 5])) > 5.0:
+            break
+    else:
+        raise RuntimeError("demo: no drivable random maneuver found in 50 draws")
     rng = np.random.default_rng(seed)
     df = pd.DataFrame(
         {
