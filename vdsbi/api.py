@@ -439,10 +439,19 @@ def identify(
                 on_simulate=on_sim,
                 state=state,
             )
-    except BaseException:
+    except BaseException as err:
         bars.close()
         if out is not None and created and not (out / CHECKPOINT).exists():
             shutil.rmtree(out, ignore_errors=True)
+        if isinstance(err, ValueError) and str(err).startswith("Too few simulations"):
+            # Every draw left the model's domain (car stopped or reversed, non-finite): that
+            # is a property of this recording, not a bug — say so in one line.
+            raise InputError(
+                prob.rec.source,
+                "segment",
+                f"almost every simulation of this window failed ({err}); check the time base, "
+                "units of the torques and that the car keeps rolling in the window",
+            ) from None
         raise
     bars.close()
 
