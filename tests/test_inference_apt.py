@@ -20,6 +20,7 @@ from vdsbi.inference import (
     load_state,
     make_optimizer,
     save_state,
+    train_epoch,
     train_step,
 )
 
@@ -86,6 +87,28 @@ def test_train_step_does_not_retrace(getkey):
             values.append(float(v))
         assert TRACE_COUNTS["train_step"] - before == 1
         assert np.all(np.isfinite(values))
+
+
+def test_scanned_epoch_equals_sequential_steps(getkey):
+    # the fast path (one lax.scan per epoch) must be the same optimisation as step-by-step
+    prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
+    theta = np.asarray(prior.sample(getkey(), 128))
+    x = np.asarray(_gauss_sim(getkey(), theta)[0])
+    flow0 = build_flow(getkey(), prior, IdentityEmbedding(2), theta, x, TINY)
+    opt = make_optimizer(1e-3, 1e-4, 5.0)
+    keys = jax.random.split(getkey(), 4)
+    batches = tuple(a.reshape(4, 32, *a.shape[1:]) for a in (theta, x, np.ones(128, bool)))
+    for loss in (MaximumLikelihoodLoss(), AtomicLoss(num_atoms=4)):
+        flow, state, values = flow0, init_opt_state(flow0, opt), []
+        for i in range(4):
+            flow, state, v = train_step(flow, state, tuple(b[i] for b in batches), keys[i], loss, opt)
+            values.append(float(v))
+        before = TRACE_COUNTS["train_epoch"]
+        for _ in range(2):  # second call must reuse the trace
+            flow_e, state_e, mean_e = train_epoch(flow0, init_opt_state(flow0, opt), batches, keys, loss, opt)
+        assert TRACE_COUNTS["train_epoch"] - before == 1
+        np.testing.assert_allclose(float(mean_e), np.mean(values), rtol=1e-4)
+        assert tree_allclose(flow_e, flow, rtol=1e-4, atol=1e-6)
 
 
 def test_nonfinite_and_invalid_simulations_are_excluded_and_counted(getkey):

@@ -31,7 +31,12 @@ from ._loss import (
 )
 from ._posterior import Posterior as Posterior
 from ._prior import BoxPrior as BoxPrior
-from ._sharding import data_mesh as data_mesh, replicate as replicate, shard_batch as shard_batch
+from ._sharding import (
+    data_mesh as data_mesh,
+    replicate as replicate,
+    shard_batch as shard_batch,
+    stack_batches as stack_batches,
+)
 from ._spline import (
     num_spline_params as num_spline_params,
     rq_spline_forward as rq_spline_forward,
@@ -41,10 +46,12 @@ from ._standardize import Standardizer as Standardizer
 from ._summaries import DEFAULT_LAGS as DEFAULT_LAGS, summary_statistics as summary_statistics
 from ._train import (
     TRACE_COUNTS as TRACE_COUNTS,
+    eval_epoch as eval_epoch,
     eval_loss as eval_loss,
     fit as fit,
     init_opt_state as init_opt_state,
     make_optimizer as make_optimizer,
+    train_epoch as train_epoch,
     train_step as train_step,
 )
 from ._vehicle import (

@@ -22,3 +22,8 @@ def replicate(tree, mesh: Mesh):
     arrays, static = eqx.partition(tree, eqx.is_array)
     arrays = jax.device_put(arrays, NamedSharding(mesh, P()))
     return eqx.combine(arrays, static)
+
+
+def stack_batches(tree, mesh: Mesh):
+    """Place leaves shaped ``(num_batches, batch, ...)`` with the batch (second) axis split."""
+    return jax.device_put(tree, NamedSharding(mesh, P(None, "batch")))

@@ -13,7 +13,7 @@ from jaxtyping import PRNGKeyArray
 
 from ._flow import ConditionalFlow, trainable_filter
 from ._loss import AbstractLoss
-from ._sharding import data_mesh, replicate, shard_batch
+from ._sharding import data_mesh, replicate, stack_batches
 
 # Incremented at TRACE time (a Python side effect): a regression test asserts that
 # the step is traced once for fixed shapes, never once per call.
@@ -29,25 +29,56 @@ def make_optimizer(learning_rate: float, weight_decay: float, clip_norm: float):
     )
 
 
-@eqx.filter_jit
-def train_step(flow: ConditionalFlow, opt_state, batch, key: PRNGKeyArray, loss: AbstractLoss, optimizer):
-    """One optimisation step on ``batch = (theta, x, prior_mask)``; returns ``(flow, opt_state, loss)``."""
-    TRACE_COUNTS["train_step"] += 1
-    params, static = eqx.partition(flow, trainable_filter(flow))
-
+def _update(params, static, opt_state, batch, key, loss: AbstractLoss, optimizer):
     def f(p):
         return loss(eqx.combine(p, static), *batch, key)
 
     value, grads = jax.value_and_grad(f)(params)
     updates, opt_state = optimizer.update(grads, opt_state, params)
-    params = eqx.apply_updates(params, updates)
+    return eqx.apply_updates(params, updates), opt_state, value
+
+
+@eqx.filter_jit
+def train_step(flow: ConditionalFlow, opt_state, batch, key: PRNGKeyArray, loss: AbstractLoss, optimizer):
+    """One optimisation step on ``batch = (theta, x, prior_mask)``; returns ``(flow, opt_state, loss)``."""
+    TRACE_COUNTS["train_step"] += 1
+    params, static = eqx.partition(flow, trainable_filter(flow))
+    params, opt_state, value = _update(params, static, opt_state, batch, key, loss, optimizer)
     return eqx.combine(params, static), opt_state, value
+
+
+@eqx.filter_jit
+def train_epoch(flow: ConditionalFlow, opt_state, batches, keys, loss: AbstractLoss, optimizer):
+    """All steps of one epoch in a ``lax.scan``: ``batches`` leaves are ``(num_batches, batch, ...)``.
+
+    Python dispatch of a small flow's step costs more than its arithmetic, so the epoch is one
+    compiled loop; returns ``(flow, opt_state, mean loss)``.
+    """
+    TRACE_COUNTS["train_epoch"] += 1
+    params, static = eqx.partition(flow, trainable_filter(flow))
+
+    def body(carry, inp):
+        params, opt_state = carry
+        batch, key = inp
+        params, opt_state, value = _update(params, static, opt_state, batch, key, loss, optimizer)
+        return (params, opt_state), value
+
+    (params, opt_state), values = jax.lax.scan(body, (params, opt_state), (batches, keys))
+    return eqx.combine(params, static), opt_state, jnp.mean(values)
 
 
 @eqx.filter_jit
 def eval_loss(flow: ConditionalFlow, batch, key: PRNGKeyArray, loss: AbstractLoss):
     TRACE_COUNTS["eval_loss"] += 1
     return loss(flow, *batch, key)
+
+
+@eqx.filter_jit
+def eval_epoch(flow: ConditionalFlow, batches, key: PRNGKeyArray, loss: AbstractLoss):
+    """Mean loss over ``(num_batches, batch, ...)`` validation batches, in one compiled loop."""
+    TRACE_COUNTS["eval_epoch"] += 1
+    values = jax.lax.map(lambda b: loss(flow, *b, key), batches)
+    return jnp.mean(values)
 
 
 def init_opt_state(flow: ConditionalFlow, optimizer):
@@ -105,24 +136,20 @@ def fit(
     flow = replicate(flow, mesh)
     opt_state = replicate(init_opt_state(flow, optimizer), mesh)
     key, val_key = jax.random.split(key)
-    val_batches = [
-        shard_batch((theta[idx], x[idx], prior_mask[idx]), mesh)
-        for idx in (va[i * vsz : (i + 1) * vsz] for i in range(nvb))
-    ]
+    data = (theta, x, prior_mask)
+    val_idx = va[: nvb * vsz].reshape(nvb, vsz)
+    val_batches = stack_batches(jax.tree.map(lambda a: a[val_idx], data), mesh)
     best, best_flow, best_epoch, since = np.inf, flow, -1, 0
     train_hist, val_hist = [], []
     for epoch in range(max_epochs):
         key, k_perm, k_steps = jax.random.split(key, 3)
-        perm = tr[np.asarray(jax.random.permutation(k_perm, tr.size))]
-        step_keys = jax.random.split(k_steps, nb)
-        total = jnp.zeros(())
-        for b in range(nb):
-            idx = perm[b * bsz : (b + 1) * bsz]
-            batch = shard_batch((theta[idx], x[idx], prior_mask[idx]), mesh)
-            flow, opt_state, value = train_step(flow, opt_state, batch, step_keys[b], loss, optimizer)
-            total = total + value
-        train_loss = float(total) / nb
-        val_loss = float(sum(eval_loss(flow, vb, val_key, loss) for vb in val_batches)) / nvb
+        perm = tr[np.asarray(jax.random.permutation(k_perm, tr.size))][: nb * bsz].reshape(nb, bsz)
+        batches = stack_batches(jax.tree.map(lambda a: a[perm], data), mesh)
+        flow, opt_state, total = train_epoch(
+            flow, opt_state, batches, jax.random.split(k_steps, nb), loss, optimizer
+        )
+        train_loss = float(total)
+        val_loss = float(eval_epoch(flow, val_batches, val_key, loss))
         train_hist.append(train_loss)
         val_hist.append(val_loss)
         if val_loss < best:
