@@ -138,13 +138,13 @@ def fit(
     key, val_key = jax.random.split(key)
     data = (theta, x, prior_mask)
     val_idx = va[: nvb * vsz].reshape(nvb, vsz)
-    val_batches = stack_batches(jax.tree.map(lambda a: a[val_idx], data), mesh)
+    val_batches = stack_batches(tuple(a[val_idx] for a in data), mesh)
     best, best_flow, best_epoch, since = np.inf, flow, -1, 0
     train_hist, val_hist = [], []
     for epoch in range(max_epochs):
         key, k_perm, k_steps = jax.random.split(key, 3)
         perm = tr[np.asarray(jax.random.permutation(k_perm, tr.size))][: nb * bsz].reshape(nb, bsz)
-        batches = stack_batches(jax.tree.map(lambda a: a[perm], data), mesh)
+        batches = stack_batches(tuple(a[perm] for a in data), mesh)
         flow, opt_state, total = train_epoch(
             flow, opt_state, batches, jax.random.split(k_steps, nb), loss, optimizer
         )
