@@ -19,6 +19,7 @@ Protocol (differences from sbibm are stated, not hidden):
 
 import argparse
 import dataclasses
+import fcntl
 import json
 import os
 import time
@@ -134,32 +135,52 @@ def main():
     if args.quick:
         args.tasks, args.budgets, args.n_obs = ["two_moons"], [1_000], 2
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
-    results = []
-    if os.path.exists(args.out):  # resume: keep finished cells
-        with open(args.out) as f:
-            results = json.load(f).get("results", [])
-    done = {(r["task"], r["method"], r["budget"]) for r in results}
+    done = {_key(r) for r in _load(args.out)}  # resume: finished cells are skipped
     cells = [(b, m, t) for b in sorted(args.budgets) for m in args.methods for t in args.tasks]
     for b, m, t in cells:
         if (t, m, b) in done:
             continue
         print(f"cell {t} {m} {b}", flush=True)
-        results.append(run_cell(t, m, b, args.n_obs, args.num_samples, args.seed))
+        results = _save(args.out, run_cell(t, m, b, args.n_obs, args.num_samples, args.seed))
+        print(table(results), flush=True)
+
+
+def _key(r):
+    return (r["task"], r["method"], r["budget"])
+
+
+def _load(path):
+    if not os.path.exists(path):
+        return []
+    with open(path) as f:
+        return json.load(f).get("results", [])
+
+
+def _save(path, result):
+    """Merge one finished cell into the JSON under a lock, so several workers (e.g. one per
+    core, each given other --tasks/--budgets) can fill the same grid without losing cells."""
+    with open(path + ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        results = [r for r in _load(path) if _key(r) != _key(result)] + [result]
+        order = {
+            (t, m, b): i
+            for i, (b, m, t) in enumerate((b, m, t) for b in BUDGETS for m in ("npe", "apt") for t in TASKS)
+        }
+        results.sort(key=lambda r: order.get(_key(r), len(order)))
         meta = {
             "devices": [str(d) for d in jax.devices()],
             "config": {str(b): dataclasses.asdict(config_for(b)) for b in BUDGETS},
             "protocol": __doc__,
         }
-        tmp = args.out + ".tmp"
-        with open(tmp, "w") as f:
+        with open(path + ".tmp", "w") as f:
             json.dump({"results": results, "meta": meta}, f, indent=1)
-        os.replace(tmp, args.out)
-        md = os.path.splitext(args.out)[0] + ".md"
+        os.replace(path + ".tmp", path)
+        md = os.path.splitext(path)[0] + ".md"
         with open(md + ".tmp", "w") as f:
             f.write("# sbibm tasks: C2ST (mean±sd over observations) [training wall time]\n\n")
             f.write(table(results) + "\n")
         os.replace(md + ".tmp", md)
-        print(table(results), flush=True)
+    return results
 
 
 if __name__ == "__main__":
