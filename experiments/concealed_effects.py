@@ -18,7 +18,8 @@ Generator (documented so the ranges can be judged):
   * sensor noise: additive white Gaussian, std ax, ay U[0.05, 0.15] m/s², yaw_rate
     U[0.002, 0.006] rad/s, omega U[0.05, 0.15] rad/s, vx U[0.02, 0.08] m/s; vx recorded in half of
     the recordings; the std is written to vehicle.json's noise_std;
-  * simulated with the simulator's default solver (RK4, 2.5 ms).
+  * simulated with the simulator's default solver (RK4, 2.5 ms), or with ``--generator adaptive``
+    by diffrax Tsit5 at rtol = atol = 1e-9 (numerics independent of the diagnosis's RK4).
 
 Usage:
     python experiments/concealed_effects.py [--quick] [--data DIR] [--out DIR] [--per-effect 3]
@@ -48,6 +49,7 @@ from vdsbi.simulator import (  # noqa: E402
     EFFECTS,
     PARAM_NAMES,
     VEHICLE_KEYS,
+    Solver,
     Vehicle,
     default_vehicle,
     random_profile,
@@ -94,7 +96,7 @@ def case_list(per_effect: int, clean: int, pairs: int, seed: int):
     return cases
 
 
-def make_case(i: int, effects: tuple, seed: int, duration: float, folder: Path):
+def make_case(i: int, effects: tuple, seed: int, duration: float, folder: Path, solver=None):
     rng = np.random.default_rng([seed, i])
     d = default_vehicle()
     consts = {k: float(getattr(d, k)) for k in VEHICLE_KEYS}
@@ -106,6 +108,7 @@ def make_case(i: int, effects: tuple, seed: int, duration: float, folder: Path):
     channels = [c for c in CHANNELS if c != "vx" or with_vx]
     noise = {c: float(rng.uniform(*NOISE_RANGES[c])) for c in channels}
     veh = Vehicle(**consts, noise_std=noise)
+    solver_kw = {} if solver is None else {"solver": solver}
     for attempt in range(50):  # noqa: B007
         theta = np.array(
             [
@@ -122,7 +125,9 @@ def make_case(i: int, effects: tuple, seed: int, duration: float, folder: Path):
         inputs = random_profile(key, duration)
         v0 = float(rng.uniform(12, 25))
         with jax.enable_x64(True):
-            ys, ok = simulate(theta, inputs, veh, v0=v0, effects=list(effects), effect_params=params)
+            ys, ok = simulate(
+                theta, inputs, veh, v0=v0, effects=list(effects), effect_params=params, **solver_kw
+            )
         if ok and np.all(np.isfinite(ys)) and ys[:, 5].min() > 4.0 and np.abs(ys[:, 3:5]).max() < 250:
             break
     else:
@@ -313,6 +318,14 @@ def main(argv=None) -> int:
     ap.add_argument("--pairs", type=int, default=3)
     ap.add_argument("--seed", type=int, default=20240601)
     ap.add_argument("--limit", type=int, default=None, help="stop after this many recordings")
+    ap.add_argument(
+        "--generator",
+        choices=("rk4", "adaptive"),
+        default="rk4",
+        help="rk4: the simulator's default solver (same numerics as the diagnosis); adaptive: "
+        "diffrax Tsit5 at rtol = atol = 1e-9, so the recordings do not share the diagnosis's "
+        "discretisation",
+    )
     args = ap.parse_args(argv)
     jax.config.update("jax_compilation_cache_dir", str(Path(args.data).parent / "vdsbi_jax_cache"))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 2.0)
@@ -332,6 +345,10 @@ def main(argv=None) -> int:
     else:
         cases = case_list(args.per_effect, args.clean, args.pairs, args.seed)
         duration, kw, name = 20.0, {}, "concealed_effects"
+    solver = None
+    if args.generator == "adaptive":
+        solver = Solver(dt=None, rtol=1e-9, atol=1e-9)
+        data, name = data.with_name(data.name + "_adaptive"), name + "_adaptive"
     if args.limit:
         cases = cases[: args.limit]
     results = []
@@ -342,7 +359,7 @@ def main(argv=None) -> int:
             results.append(json.loads(done.read_text()))
             continue
         if not (folder / "recording.csv").exists():
-            make_case(i, effects, args.seed, duration, folder)
+            make_case(i, effects, args.seed, duration, folder, solver)
         t0 = time.perf_counter()
         try:
             res = diagnose(folder / "recording.csv", folder / "vehicle.json", plots=False, **kw)
