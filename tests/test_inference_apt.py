@@ -20,8 +20,8 @@ from vdsbi.inference import (
     load_state,
     make_optimizer,
     save_state,
-    train_epoch,
     train_step,
+    train_steps,
 )
 
 TINY = NPEConfig(num_layers=2, num_bins=4, hidden=8, batch_size=32, max_epochs=3, patience=2, num_atoms=4)
@@ -103,10 +103,10 @@ def test_scanned_epoch_equals_sequential_steps(getkey):
         for i in range(4):
             flow, state, v = train_step(flow, state, tuple(b[i] for b in batches), keys[i], loss, opt)
             values.append(float(v))
-        before = TRACE_COUNTS["train_epoch"]
+        before = TRACE_COUNTS["train_steps"]
         for _ in range(2):  # second call must reuse the trace
-            flow_e, state_e, mean_e = train_epoch(flow0, init_opt_state(flow0, opt), batches, keys, loss, opt)
-        assert TRACE_COUNTS["train_epoch"] - before == 1
+            flow_e, state_e, mean_e = train_steps(flow0, init_opt_state(flow0, opt), batches, keys, loss, opt)
+        assert TRACE_COUNTS["train_steps"] - before == 1
         np.testing.assert_allclose(float(mean_e), np.mean(values), rtol=1e-4)
         assert tree_allclose(flow_e, flow, rtol=1e-4, atol=1e-6)
 

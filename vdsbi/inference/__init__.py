@@ -46,13 +46,13 @@ from ._standardize import Standardizer as Standardizer
 from ._summaries import DEFAULT_LAGS as DEFAULT_LAGS, summary_statistics as summary_statistics
 from ._train import (
     TRACE_COUNTS as TRACE_COUNTS,
-    eval_epoch as eval_epoch,
     eval_loss as eval_loss,
+    eval_steps as eval_steps,
     fit as fit,
     init_opt_state as init_opt_state,
     make_optimizer as make_optimizer,
-    train_epoch as train_epoch,
     train_step as train_step,
+    train_steps as train_steps,
 )
 from ._vehicle import (
     IdentifySettings as IdentifySettings,
