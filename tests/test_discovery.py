@@ -13,7 +13,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from vdsbi.discovery import REQUIRED_KEYS, Fitter, make_windows  # noqa: E402
+from vdsbi.discovery import REQUIRED_KEYS, Fitter, make_windows, verdict  # noqa: E402
 from vdsbi.io import build_recording, read_recording, read_vehicle  # noqa: E402
 from vdsbi.simulator import CHANNELS, PARAM_NAMES, simulate  # noqa: E402
 
@@ -64,6 +64,16 @@ def test_report_has_required_keys(quick):
         for ch, d in rep["fit"][when].items():
             assert ch in CHANNELS and set(d) == {"nrmse", "chi2_dof"}
         assert set(rep["theta"][when]) == set(PARAM_NAMES)
+
+
+def test_verdict_claims_an_effect_only_when_it_accounts_for_the_mismatch(quick):
+    rep = json.loads((_case(quick, "sensor_bias") / "report.json").read_text())
+    assert rep["explained"] is True and "sensor_bias" in rep["verdict"]
+    assert verdict(False, [], 0.5, 0.05, None)["explained"] is None
+    assert verdict(True, [], 0.5, 0.05, None)["explained"] is False
+    assert verdict(True, ["road_bank"], 0.001, 0.05, True)["explained"] is False  # remainder
+    assert verdict(True, ["road_bank"], 0.5, 0.05, False)["explained"] is False  # absorbing
+    assert verdict(True, ["road_bank"], 0.5, 0.05, True)["explained"] is True
 
 
 def test_fit_recovers_theta_noise_free(quick, x64):

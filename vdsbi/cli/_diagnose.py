@@ -65,6 +65,7 @@ def run(args) -> int:
     if not args.quiet:
         det = "detected" if rep["mismatch_detected"] else "not detected"
         print(f"mismatch {det} (p = {rep['p_value']:.3g}); chosen: {', '.join(rep['chosen']) or 'none'}")
+        print(f"verdict: {rep['verdict']}")
         for ch, b in rep["fit"]["before"].items():
             a = rep["fit"]["after"][ch]
             print(f"  {ch:12s} held-out χ²/dof {b['chi2_dof']:8.3f} -> {a['chi2_dof']:8.3f}")

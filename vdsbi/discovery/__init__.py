@@ -11,6 +11,7 @@ from ._diagnose import (
     DiagnosisResult as DiagnosisResult,
     default_identify as default_identify,
     diagnose as diagnose,
+    verdict as verdict,
 )
 from ._fit import (
     EFFECT_BOUNDS as EFFECT_BOUNDS,

@@ -146,6 +146,37 @@ def _at_bounds(fit: FitResult, fitter: Fitter, frac: float = 0.01) -> list[str]:
     return out
 
 
+def verdict(detected: bool, chosen: Sequence[str], p_after: float, alpha: float, held_improved) -> dict:
+    """One-line conclusion, and whether the chosen effects account for the whole mismatch.
+
+    `explained` needs both a residual consistent with noise after the fix (p_after ≥ α) and a
+    better held-out fit; otherwise physics outside the library remains (or the fix is absorbing
+    it), and the report says so instead of claiming the effect as the answer.
+    """
+    if not detected:
+        return {"explained": None, "text": "no mismatch detected: the base model fits within the noise"}
+    if not chosen:
+        return {
+            "explained": False,
+            "text": "mismatch detected, but no candidate effect has strong evidence: the missing "
+            "physics is outside the library (see where it is located)",
+        }
+    names = " + ".join(chosen)
+    if held_improved is False:
+        return {
+            "explained": False,
+            "text": f"mismatch detected; {names} fits the fitted part but not the held-out part: "
+            "it is absorbing physics outside the library, not naming it",
+        }
+    if p_after < alpha:
+        return {
+            "explained": False,
+            "text": f"mismatch detected; {names} explains part of it (p after the fix = {p_after:.3g} < "
+            f"{alpha:g}): physics outside the library remains",
+        }
+    return {"explained": True, "text": f"mismatch detected and explained by {names}"}
+
+
 def _theta_dict(x) -> dict:
     return {n: float(v) for n, v in zip(PARAM_NAMES, x)}
 
@@ -280,6 +311,8 @@ def diagnose(
     chi_a = float(np.mean([v["chi2_dof"] for v in fit_after.values()]))
     top = ranked[0]
     second = ranked[1] if len(ranked) > 1 else None
+    held_improved = bool(chi_a < chi_b) if chosen else None
+    concl = verdict(detected, chosen, float(test1.p_value), alpha, held_improved)
     report = {
         "source": str(recording.source),
         "mismatch_detected": bool(detected),
@@ -317,7 +350,9 @@ def diagnose(
         "fit": {"before": fit_before, "after": fit_after},
         # Validation: does the chosen fix also improve the held-out part (mean χ²/dof over
         # channels)? If not, the effect is absorbing some other mismatch on the fitted part.
-        "held_out_improved": bool(chi_a < chi_b) if chosen else None,
+        "held_out_improved": held_improved,
+        "explained": concl["explained"],
+        "verdict": concl["text"],
         "fit_train_chi2_dof": {"before": base.chi2_dof, "after": final.chi2_dof},
         "theta": {"before": _theta_dict(base.theta), "after": _theta_dict(final.theta)},
         "theta_std": {"before": _theta_dict(base.theta_std), "after": _theta_dict(final.theta_std)},

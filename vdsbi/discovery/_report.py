@@ -24,6 +24,8 @@ def _json_default(o):
 
 def markdown(rep: dict) -> str:
     L = [f"# Mismatch diagnosis: {rep['source']}", ""]
+    if "verdict" in rep:
+        L += [f"**Verdict: {rep['verdict']}.**", ""]
     det = "**detected**" if rep["mismatch_detected"] else "not detected"
     L.append(
         f"Misspecification of the base model: {det} (p = {rep['p_value']:.4g} at α = {rep['alpha']:g}); "
