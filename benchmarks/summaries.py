@@ -126,7 +126,7 @@ def main(argv=None):
             embedding=embedding,
             rounds=1,
             sims_per_round=n_sims,
-            config=settings.config,
+            config=settings.npe_config,
         )
         train_s = time.perf_counter() - t0
         t0 = time.perf_counter()

@@ -71,3 +71,40 @@ def test_flow_with_time_channel_inputs(getkey):
     flow = ConditionalFlow(getkey(), prior, emb, (t, c), num_layers=2, hidden=8, x_standardizer=std)
     lp = jax.vmap(flow.log_prob)(jnp.full((64, 2), 0.5), xs)
     assert lp.shape == (64,) and np.all(np.isfinite(np.asarray(lp)))
+
+
+def test_trajectory_standardisation_exposes_small_deviations(getkey, tmp_path):
+    # simulations sharing one time base: a large common manoeuvre, a small θ-driven part, and an
+    # input channel identical in every example
+    n, t = 256, 50
+    base = jnp.linspace(0.0, 100.0, t)  # speed ramp dwarfs the signal
+    a = jax.random.normal(getkey(), (n, 1, 1))
+    sig = base[None, :, None] + 0.01 * a * jnp.ones((1, t, 1))
+    inp = jnp.broadcast_to(jnp.sin(jnp.arange(t) / 5.0)[None, :, None], (n, t, 1))
+    xs = jnp.concatenate([sig, inp], -1)
+    std = Standardizer.fit(xs, "trajectory")
+    assert std.mean.shape == std.std.shape == (t, 2)
+    z = np.asarray(jax.vmap(std)(xs))
+    # the small part is O(1) and carries a: per-channel scaling would leave it at ~3e-4
+    np.testing.assert_allclose(z[:, 0, 0], np.asarray(a[:, 0, 0] - a.mean()) / np.asarray(a.std()), atol=1e-2)
+    per_channel = np.asarray(jax.vmap(Standardizer.fit(xs, "channel"))(xs))
+    assert np.std(per_channel[:, 0, 0]) < 1e-3
+    # the input channel is kept (per-channel standardised), not zeroed
+    np.testing.assert_allclose(z[0, :, 1].std(), 1.0, rtol=1e-3)
+    # and the flow round-trips through save/load with the (T, C)-shaped statistics
+    prior = BoxPrior(jnp.zeros(2), jnp.ones(2))
+    flow = ConditionalFlow(
+        getkey(),
+        prior,
+        MLPEmbedding(getkey(), t * 2, 8, 16, 1),
+        (t, 2),
+        num_layers=2,
+        hidden=8,
+        x_standardizer=std,
+    )
+    post = Posterior(flow, xs[0])
+    post.save(tmp_path / "p.npz")
+    back = Posterior.load(tmp_path / "p.npz")
+    np.testing.assert_array_equal(np.asarray(back.flow.x_standardizer.mean), np.asarray(std.mean))
+    s = post.sample(jax.random.key(1), 10)
+    np.testing.assert_allclose(np.asarray(back.log_prob(s)), np.asarray(post.log_prob(s)), rtol=1e-5)

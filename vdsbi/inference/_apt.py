@@ -39,7 +39,9 @@ class NPEConfig:
         validation_fraction: fraction of each round's simulations held out for validation.
         num_atoms: atoms per example in the APT loss (rounds > 1).
         combined_loss: add maximum likelihood on prior draws to the atomic loss.
-        x_standardize: ``"channel"`` (statistics over all axes but the last), ``"global"`` or ``"none"``.
+        x_standardize: ``"channel"`` (statistics over all axes but the last), ``"global"``,
+            ``"trajectory"`` (minus the mean trajectory, per-channel scale; see `Standardizer.fit`)
+            or ``"none"``.
         truncation_epsilon: mass outside the HPD region for ``truncate=True`` (TSNPE).
         truncation_samples: posterior samples used to locate the HPD threshold.
         retrain_from_scratch: re-initialise the flow every round (default: continue training).
@@ -66,9 +68,10 @@ class NPEConfig:
     retrain_from_scratch: bool = False
 
     def __post_init__(self):
-        if self.x_standardize not in ("channel", "global", "none"):
+        if self.x_standardize not in ("channel", "global", "trajectory", "none"):
             raise ValueError(
-                f"x_standardize must be 'channel', 'global' or 'none', got {self.x_standardize!r}"
+                "x_standardize must be 'channel', 'global', 'trajectory' or 'none', "
+                f"got {self.x_standardize!r}"
             )
         if not 0.0 < self.validation_fraction < 1.0:
             raise ValueError("validation_fraction must be in (0, 1)")

@@ -11,7 +11,8 @@ class Standardizer(eqx.Module):
     """``(x - mean) / std`` on ONE example, broadcasting ``mean``/``std`` over its shape.
 
     ``mean``/``std`` have shape ``(C,)`` (per channel: statistics over all axes but
-    the last, so for vector data this is per feature) or ``()`` (one global scale).
+    the last, so for vector data this is per feature), ``()`` (one global scale) or the
+    example's shape (``"trajectory"``: see `fit`).
     """
 
     mean: Float[Array, "..."]
@@ -19,10 +20,29 @@ class Standardizer(eqx.Module):
 
     @classmethod
     def fit(
-        cls, x: Float[Array, "n ..."], mode: Literal["channel", "global", "none"] = "channel"
+        cls, x: Float[Array, "n ..."], mode: Literal["channel", "global", "trajectory", "none"] = "channel"
     ) -> "Standardizer":
-        """Statistics from a batch ``x`` of shape ``(n, ..., C)``."""
+        """Statistics from a batch ``x`` of shape ``(n, ..., C)``.
+
+        ``"trajectory"`` is for examples that share one time base and input (every simulation
+        driven by the same recorded inputs): it subtracts the mean trajectory and divides each
+        channel by the std of the deviations from it. θ-driven differences that are small
+        beside the manoeuvre's own variation (wheel slip is ~1 % of ω) then become O(1)
+        instead of vanishing under a per-channel scale. Channels that never deviate (the
+        inputs themselves) get per-channel standardisation instead, so they are kept.
+        """
         x = jnp.asarray(x)
+        if mode == "trajectory":
+            if x.ndim < 3:
+                raise ValueError(f"'trajectory' standardisation needs (n, T, C) data, got {x.shape}")
+            axes = tuple(range(x.ndim - 1))
+            traj = jnp.mean(x, axis=0)
+            dev = jnp.std(x - traj, axis=axes)
+            raw_mean, raw_std = jnp.mean(x, axis=axes), jnp.std(x, axis=axes)
+            const = dev <= 1e-6 * jnp.maximum(raw_std, 1e-12)
+            mean = jnp.where(const, raw_mean, traj)
+            std = jnp.where(const, jnp.where(raw_std > 1e-12, raw_std, 1.0), dev)
+            return cls(mean=mean, std=jnp.broadcast_to(std, traj.shape))
         if mode == "none":
             return cls.identity(x.shape[-1] if x.ndim > 1 else 1, per_channel=x.ndim > 1)
         axes = tuple(range(x.ndim - 1)) if (mode == "channel" and x.ndim > 1) else None
