@@ -373,6 +373,9 @@ def main(argv=None) -> int:
         r["case"] = folder.name
         done.write_text(json.dumps(r, indent=1, default=float))
         results.append(r)
+        # A long run compiles many kernels; free them (they reload from the persistent
+        # cache) or the process runs out of memory mappings for LLVM's JIT.
+        jax.clear_caches()
         print(
             f"[{i + 1}/{len(cases)}] {folder.name}: detected={r['detected']} p={r['p_value']:.3g} "
             f"chosen={'+'.join(r['chosen']) or 'none'} mag={r['magnitude_rel_error']} "
