@@ -125,3 +125,27 @@ def test_cli_diagnose(quick, tmp_path):
     for f in ("report.md", "residual_heatmap.png", "overlay.png", "residual_spectra.png"):
         assert (out / f).exists()
     assert jax.config.jax_enable_x64 is False  # diagnose leaves the global precision alone
+
+
+def test_pairs_pay_a_prior_penalty_and_ranking_agrees_with_choice():
+    from types import SimpleNamespace
+
+    from vdsbi.discovery import choose, rank
+
+    def fit(chi2, k):
+        return SimpleNamespace(chi2=chi2, num_params=6 + k, num_samples=10_000)
+
+    base = fit(1000.0, 0)
+    half_log_n = 0.5 * np.log(10_000)
+    # a pair that adds log-evidence 2 over its single (< 3) ranks below it and is not chosen
+    fits = {(): base, ("a",): fit(900.0, 1), ("a", "b"): fit(900.0 - 2 * (2 + half_log_n), 2)}
+    ranked = rank(fits, base)
+    assert ranked[0].effects == ("a",) and choose(ranked, True) == ("a",)
+    pair = next(r for r in ranked if r.effects == ("a", "b"))
+    assert pair.score == pytest.approx(pair.log_bayes_factor - 3.0)
+    # one that adds 4 (> 3) wins, and the choice is the top of the ranking
+    fits[("a", "b")] = fit(900.0 - 2 * (4 + half_log_n), 2)
+    ranked = rank(fits, base)
+    assert ranked[0].effects == ("a", "b") and choose(ranked, True) == ("a", "b")
+    assert choose(ranked, False) == ()
+    assert sum(r.probability for r in ranked) == pytest.approx(1.0)

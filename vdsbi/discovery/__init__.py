@@ -21,5 +21,14 @@ from ._fit import (
     Fitter as Fitter,
     rk4_readings as rk4_readings,
 )
-from ._rank import Ranked as Ranked, bic_score as bic_score, rank as rank, separability as separability
+from ._rank import (
+    PAIR_LOG_PRIOR as PAIR_LOG_PRIOR,
+    STRONG as STRONG,
+    Ranked as Ranked,
+    bic_score as bic_score,
+    choose as choose,
+    merge as merge,
+    rank as rank,
+    separability as separability,
+)
 from ._report import REQUIRED_KEYS as REQUIRED_KEYS, write_report as write_report

@@ -30,7 +30,7 @@ from ..simulator._vehicle import CHANNELS
 from ._candidates import label, pair_candidates, single_candidates
 from ._data import Windows, make_windows
 from ._fit import EFFECT_BOUNDS, EFFECT_NAMES, FitResult, Fitter
-from ._rank import STRONG, Ranked, choose, rank, separability
+from ._rank import PAIR_LOG_PRIOR, STRONG, Ranked, choose, merge, rank, separability
 
 IdentifyFn = Callable[[Fitter, tuple, "np.ndarray | None", int], FitResult]
 
@@ -121,6 +121,7 @@ def _effect_rows(ranked: Sequence[Ranked]) -> list[dict]:
             "name": r.name,
             "effects": list(r.effects),
             "score": r.score,
+            "log_bayes_factor": r.log_bayes_factor,
             "probability": r.probability,
             "chi2": r.chi2,
             "num_params": r.num_effect_params,
@@ -276,7 +277,7 @@ def diagnose(
         for pair in pairs:
             lead = max(pair, key=lambda e: by_name[e].score)
             fits[pair] = identify(coarse, pair, fits[(lead,)].z, single_iters)
-        ranked = rank(fits, base_c)
+        ranked = search = rank(fits, base_c)
         polished: dict[tuple, FitResult] = {(): base}
         if detected and len(ranked[0].effects) == 2 and ranked[0].score >= STRONG:
             # A pair wins the search: the search caps iterations and a pair starts where its
@@ -288,6 +289,8 @@ def diagnose(
             decision = rank(polished, base)
             chosen = choose(decision, detected)
             say("pair check: " + ", ".join(f"{r.name} {r.score:.1f}" for r in decision))
+            # report the polished evidence for these three, so the ranking and choice agree
+            ranked = merge(ranked, decision)
         else:
             chosen = choose(ranked, detected)
         if chosen in polished:
@@ -304,7 +307,7 @@ def diagnose(
         full = windows.fit_data("valid", truncate=False)
         pred0 = fitter.predict(base.z, (), full)
         pred1 = fitter.predict(final.z, chosen, full) if chosen else pred0
-        sep = separability(ranked, base_c)
+        sep = separability(search, base_c)  # all at the search step, against its own none
     fit_before, fit_after = _held_metrics(pred0, windows), _held_metrics(pred1, windows)
     at_bounds = _at_bounds(final, fitter)
     chi_b = float(np.mean([v["chi2_dof"] for v in fit_before.values()]))
@@ -380,7 +383,8 @@ def diagnose(
             "+ Laplace covariance",
             "test": "max standardised low-band/high-band residual power ratio; null by simulated noise "
             f"through the linearised refit ({num_draws} draws)",
-            "evidence": "BIC log Bayes factor vs 'none'; strong if > " + f"{STRONG:g}",
+            "evidence": "score = BIC log Bayes factor vs 'none' + log prior odds (pairs "
+            f"{PAIR_LOG_PRIOR:g}); strong if > {STRONG:g}",
             "solver_dt_s": {"search": coarse.dt, "final": fitter.dt},
         },
         "seconds": time.perf_counter() - t_start,

@@ -5,11 +5,14 @@ Evidence: the BIC approximation of the log marginal likelihood relative to "none
     score = ½·(χ²_none − χ²_cand) − ½·k·ln N,
 
 with k the number of effect parameters added and N the number of fitted residual entries
-(θ and initial speeds are common to all candidates and cancel). A score is a log Bayes factor
-against "none"; scores > 3 (odds > 20:1) count as strong. Ranking confidence: the candidates'
-posterior probabilities under equal prior odds, exp(score) normalised over all fitted
-candidates. When the whitened residuals are correlated in time (coloured noise, real data) the
-χ² differences — and with them the odds — are overstated; the report says so.
+(θ and initial speeds are common to all candidates and cancel): a log Bayes factor against
+"none". The ranking score adds the log prior odds: 0 for "none" and single effects, −3 for a
+pair (prior odds e⁻³ ≈ 1:20 against each pair — there are 45 pairs but 10 singles, and a pair
+must earn its second effect), so a pair ranks above its better member only if the data favour
+it strongly. Scores > 3 (posterior odds > 20:1 against "none") count as strong. Ranking
+confidence: posterior probabilities, exp(score) normalised over all fitted candidates. When the
+whitened residuals are correlated in time (coloured noise, real data) the χ² differences — and
+with them the odds — are overstated; the report says so.
 """
 
 from __future__ import annotations
@@ -24,6 +27,8 @@ from ._fit import FitResult
 
 #: Log Bayes factor counted as strong evidence (odds 20:1).
 STRONG = 3.0
+#: Log prior odds of a pair of effects against a single effect or "none".
+PAIR_LOG_PRIOR = -STRONG
 
 
 @dataclasses.dataclass
@@ -31,6 +36,7 @@ class Ranked:
     name: str
     effects: tuple[str, ...]
     score: float
+    log_bayes_factor: float
     probability: float
     chi2: float
     num_effect_params: int
@@ -44,32 +50,41 @@ def bic_score(fit: FitResult, base: FitResult) -> float:
 
 
 def rank(fits: dict[tuple[str, ...], FitResult], base: FitResult) -> list[Ranked]:
-    """Candidates sorted by score (best first), with posterior probabilities."""
+    """Candidates sorted by score (log posterior odds vs "none"; best first), with posterior
+    probabilities."""
     rows = []
     for effects, fit in fits.items():
-        s = 0.0 if not effects else bic_score(fit, base)
-        rows.append((effects, fit, s))
-    scores = np.array([s for _, _, s in rows])
+        bf = 0.0 if not effects else bic_score(fit, base)
+        rows.append((effects, fit, bf, bf + (PAIR_LOG_PRIOR if len(effects) > 1 else 0.0)))
+    scores = np.array([s for *_, s in rows])
     p = np.exp(scores - scores.max())
     p /= p.sum()
     out = [
-        Ranked(label(e), tuple(e), float(s), float(pi), f.chi2, f.num_params - base.num_params, f)
-        for (e, f, s), pi in zip(rows, p)
+        Ranked(label(e), tuple(e), float(s), float(bf), float(pi), f.chi2, f.num_params - base.num_params, f)
+        for (e, f, bf, s), pi in zip(rows, p)
     ]
     return sorted(out, key=lambda r: -r.score)
 
 
+def merge(ranked: Sequence[Ranked], better: Sequence[Ranked]) -> list[Ranked]:
+    """`ranked` with the rows of the same candidates replaced by `better` ones (e.g. re-fitted
+    at a finer step, each scored against its own "none"), re-sorted, probabilities renormalised."""
+    by = {r.effects: r for r in better if r.effects}
+    rows = [by.get(r.effects, r) for r in ranked]
+    scores = np.array([r.score for r in rows])
+    p = np.exp(scores - scores.max())
+    p /= p.sum()
+    rows = [dataclasses.replace(r, probability=float(pi)) for r, pi in zip(rows, p)]
+    return sorted(rows, key=lambda r: -r.score)
+
+
 def choose(ranked: Sequence[Ranked], detected: bool) -> tuple[str, ...]:
-    """The chosen explanation: the best candidate if the mismatch was detected and its evidence
-    is strong; a pair only if it beats the best single strongly (parsimony)."""
+    """The chosen explanation: the top candidate if the mismatch was detected and its posterior
+    odds against "none" are strong (a pair's include its prior penalty, so it is chosen only if
+    it beats the best single by log-evidence ≥ 3: parsimony)."""
     if not detected or not ranked or ranked[0].score < STRONG:
         return ()
-    best = ranked[0]
-    if len(best.effects) > 1:
-        singles = [r for r in ranked if len(r.effects) == 1]
-        if singles and best.score - singles[0].score < STRONG:
-            return singles[0].effects if singles[0].score >= STRONG else ()
-    return best.effects
+    return ranked[0].effects
 
 
 def _cos(a, b):
