@@ -67,6 +67,9 @@ def main(argv=None):
     ap.add_argument("--test", type=int, default=None, help="held-out simulations (≥ 200 for SBC)")
     ap.add_argument("--posterior-samples", type=int, default=500)
     ap.add_argument("--embeddings", default="stats,cnn")
+    ap.add_argument("--max-epochs", type=int, default=40)
+    ap.add_argument("--patience", type=int, default=6)
+    ap.add_argument("--tag", default="", help="suffix for the output files")
     args = ap.parse_args(argv)
     n_sims = args.sims or (400 if args.quick else 5000)
     n_test = args.test or (20 if args.quick else 200)
@@ -106,7 +109,10 @@ def main(argv=None):
             sims_per_round=n_sims,
             embedding=emb,
             config=NPEConfig(
-                batch_size=256, learning_rate=1e-3, max_epochs=40 if not args.quick else 10, patience=6
+                batch_size=256,
+                learning_rate=1e-3,
+                max_epochs=args.max_epochs if not args.quick else 10,
+                patience=args.patience,
             ),
         )
         obs = jax.jit(jax.vmap(lambda r: observation(r, u, emb)))
@@ -147,6 +153,7 @@ def main(argv=None):
             "rmse": dict(zip(PARAM_NAMES, rmse.tolist())),
             "mean_std": dict(zip(PARAM_NAMES, std.tolist())),
             "coverage_90": dict(zip(PARAM_NAMES, cov[LEVELS.index(0.9)].tolist())),
+            "epochs": [h["epochs"] for h in state.history],
             "wall_s": {"training_incl_simulation": train_s, "sampling": sample_s},
             "units": "l_f, h_cog in m; stiffness in 1e5 N or N/rad",
         }
@@ -160,7 +167,7 @@ def main(argv=None):
             ranks,
             cov,
             n_post,
-            out_e / f"calibration_{emb}{'_quick' if args.quick else ''}.png",
+            out_e / f"calibration_{emb}{'_quick' if args.quick else ''}{args.tag}.png",
             f"Amortized NPE ({emb}), {n_sims} sims: SBC ranks and coverage",
         )
         md += [
@@ -190,7 +197,7 @@ def main(argv=None):
             + ", ".join(f"{n}: {'yes' if w else 'no'}" for n, w in wins.items())
         ]
     results["simulation_test_s"] = sim_test_s
-    suffix = "_quick" if args.quick else ""
+    suffix = ("_quick" if args.quick else "") + args.tag
     (out_b / f"summaries{suffix}.json").write_text(json.dumps(results, indent=2))
     (out_b / f"summaries{suffix}.md").write_text("\n".join(md) + "\n")
     (out_e / f"calibration{suffix}.json").write_text(json.dumps(calib, indent=2))
