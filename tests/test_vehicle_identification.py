@@ -2,6 +2,7 @@
 
 import json
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -30,6 +31,38 @@ def test_cnn_embedding_is_sensitive_to_timing(getkey):
     late = jnp.zeros((800, 1)).at[700:750].set(5.0)
     scale = float(jnp.abs(emb(early)).max())
     assert float(jnp.abs(emb(early) - emb(late)).max()) > 1e-3 * scale
+
+
+def test_cnn_calibration_normalises_head_input_and_is_frozen(getkey):
+    """Global statistics that barely vary across simulations must reach the head at O(1)
+    scale (else the flow ignores them), and training must not move the normalisation."""
+    emb = CNNEmbedding(getkey(), in_channels=2, out_dim=4)
+    base = jax.random.normal(getkey(), (64, 400, 2))
+    level = 1.0 + 0.01 * jax.random.normal(getkey(), (64, 1, 1))  # a 1 % scale difference
+    xs = base * level
+    cal = emb.calibrate(xs)
+    f = (jax.vmap(cal.features)(xs) - cal.feature_mean) / cal.feature_std
+    np.testing.assert_allclose(np.asarray(f.mean(0)), 0.0, atol=1e-4)
+    np.testing.assert_allclose(np.asarray(f.std(0)), 1.0, rtol=1e-3)
+    np.testing.assert_allclose(np.asarray(cal(xs[0])), np.asarray(cal.head(f[0])), rtol=1e-4, atol=1e-5)
+    grads = eqx.filter_grad(lambda e: jnp.sum(jax.vmap(e)(xs) ** 2))(cal)
+    assert float(jnp.abs(grads.feature_mean).max()) == 0.0
+    assert float(jnp.abs(grads.feature_std).max()) == 0.0
+
+
+def test_cnn_front_filters_see_what_averaging_erases(getkey):
+    """A 25 Hz burst at 200 Hz averages to exactly zero over 8 samples, so without the full-rate
+    branch its sign is invisible; with it, it is not (slip-stiffness information lives in such
+    wheel oscillations)."""
+    t = jnp.arange(800)
+    burst = jnp.where((t >= 200) & (t < 264), 5 * jnp.sin(2 * jnp.pi * t / 8 + 0.3), 0.0)[:, None]
+    plain = CNNEmbedding(getkey(), in_channels=1, out_dim=8, front_filters=0)
+    blind = float(jnp.abs(plain(burst) - plain(-burst)).max())
+    emb = CNNEmbedding(getkey(), in_channels=1, out_dim=8)
+    seen = float(jnp.abs(emb(burst) - emb(-burst)).max())
+    scale = float(jnp.abs(emb(burst)).max())
+    assert blind < 1e-6 * scale  # float32 rounding only
+    assert seen > 1e-3 * scale
 
 
 def test_summary_statistics_properties(getkey):

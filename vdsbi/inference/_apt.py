@@ -166,6 +166,9 @@ def build_flow(
 ) -> ConditionalFlow:
     """A fresh flow whose θ (logit-scale) and x standardisations are fitted on ``theta``/``x``."""
     z, _ = jax.vmap(prior.to_unbounded)(jnp.asarray(theta))
+    x_standardizer = Standardizer.fit(jnp.asarray(x), config.x_standardize)
+    # data-dependent initialisation of the embedding (a fixed subset bounds the cost)
+    embedding = embedding.calibrate(jax.vmap(x_standardizer)(jnp.asarray(x[:2048])))
     return ConditionalFlow(
         key,
         prior,
@@ -178,7 +181,7 @@ def build_flow(
         tail_bound=config.tail_bound,
         use_lu=config.use_lu,
         theta_standardizer=Standardizer.fit(z, "channel"),
-        x_standardizer=Standardizer.fit(jnp.asarray(x), config.x_standardize),
+        x_standardizer=x_standardizer,
     )
 
 

@@ -51,6 +51,10 @@ class AbstractEmbedding(eqx.Module):
     @abc.abstractmethod
     def from_spec(cls, spec: dict[str, Any]) -> "AbstractEmbedding": ...
 
+    def calibrate(self, xs: Float[Array, "n ..."]) -> "AbstractEmbedding":
+        """Data-dependent initialisation from a batch of standardised examples (default: none)."""
+        return self
+
 
 @register_embedding
 class IdentityEmbedding(AbstractEmbedding):
