@@ -48,6 +48,8 @@ def summary_row(name: str, rep: dict, seconds: float) -> dict:
             for e in rep["effects"][:6]
         ],
         "chosen": rep["chosen"],
+        "explained": rep.get("explained"),
+        "verdict": rep.get("verdict"),
         "ranking_confidence": rep["ranking_confidence"],
         "separability": [p["verdict"] for g in rep["separability"] for p in g["pairs"]],
         "heldout": {c: {"before": before[c], "after": after[c]} for c in before},
@@ -80,11 +82,13 @@ def markdown(rows: list[dict]) -> str:
             f"- located: channels {loc['channels']}, bands {loc['bands_hz']}, {len(loc['windows'])} windows"
         )
         L.append(f"- chosen: **{', '.join(r['chosen']) or 'none'}**")
+        if r.get("verdict"):
+            L.append(f"- verdict: {r['verdict']}")
         chi_b = sum(d["before"]["chi2_dof"] for d in r["heldout"].values()) / len(r["heldout"])
         chi_a = sum(d["after"]["chi2_dof"] for d in r["heldout"].values()) / len(r["heldout"])
         verdict = "improves" if chi_a < chi_b else "does NOT improve (the fix absorbs some other mismatch)"
         L.append(f"- held-out mean χ²/dof {chi_b:.4g} → {chi_a:.4g}: the fix {verdict}")
-        L.append("- ranking (log Bayes factor vs none, BIC):")
+        L.append("- ranking (score: BIC log Bayes factor vs none + log prior odds, pairs −3):")
         for e in r["ranking"]:
             ps = "; ".join(
                 f"{eff}.{k} = {v:.4g} ± {e['params_std'][eff][k]:.2g}"
