@@ -72,6 +72,8 @@ def test_verdict_claims_an_effect_only_when_it_accounts_for_the_mismatch(quick):
     assert verdict(False, [], 0.5, 0.05, None)["explained"] is None
     assert verdict(True, [], 0.5, 0.05, None)["explained"] is False
     assert verdict(True, ["road_bank"], 0.001, 0.05, True)["explained"] is False  # remainder
+    weak = verdict(True, ["road_bank"], 0.03, 0.05, True)
+    assert weak["explained"] is False and "weakly" in weak["text"]
     assert verdict(True, ["road_bank"], 0.5, 0.05, False)["explained"] is False  # absorbing
     assert verdict(True, ["road_bank"], 0.5, 0.05, True)["explained"] is True
 

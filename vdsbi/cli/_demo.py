@@ -129,7 +129,13 @@ def run(args) -> int:
                 )
                 chosen = ", ".join(dres.chosen) or "none"
                 diag_msg = f"mismatch detected: {dres.mismatch_detected}; effects named: {chosen}"
-                diag_msg += f" (concealed: {', '.join(CONCEALED)})"
+                diag_msg += f" (concealed: {', '.join(CONCEALED)}); verdict: {dres.report['verdict']}"
+                if dres.mismatch_detected:
+                    # the identify step above used the base model on this very drive
+                    diag_msg += (
+                        "\n  so the identify result above came from a misspecified model: re-identify "
+                        "with the named effect (report.md has θ refitted with it)"
+                    )
         (d / "README.txt").write_text(
             "vdsbi demo\n"
             f"recording.csv, vehicle.json: a {duration:g} s simulated drive; truth.json holds the truth\n"
