@@ -71,12 +71,17 @@ def test_atomic_loss_hand_computed():
     np.testing.assert_allclose(float(got_c), expected_c, rtol=1e-6)
 
 
-def test_train_step_does_not_retrace(getkey):
+def _tiny_problem(getkey, n):
+    """n prior draws with their simulations, a TINY flow built on them, and an optimiser."""
     prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
-    theta = np.asarray(prior.sample(getkey(), 256))
+    theta = np.asarray(prior.sample(getkey(), n))
     x = np.asarray(_gauss_sim(getkey(), theta)[0])
     flow = build_flow(getkey(), prior, IdentityEmbedding(2), theta, x, TINY)
-    opt = make_optimizer(1e-3, 1e-4, 5.0)
+    return theta, x, flow, make_optimizer(1e-3, 1e-4, 5.0)
+
+
+def test_train_step_does_not_retrace(getkey):
+    theta, x, flow, opt = _tiny_problem(getkey, 256)
     state = init_opt_state(flow, opt)
     for loss in (MaximumLikelihoodLoss(), AtomicLoss(num_atoms=4)):
         before = TRACE_COUNTS["train_step"]
@@ -91,11 +96,7 @@ def test_train_step_does_not_retrace(getkey):
 
 def test_scanned_epoch_equals_sequential_steps(getkey):
     # the fast path (one lax.scan per epoch) must be the same optimisation as step-by-step
-    prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
-    theta = np.asarray(prior.sample(getkey(), 128))
-    x = np.asarray(_gauss_sim(getkey(), theta)[0])
-    flow0 = build_flow(getkey(), prior, IdentityEmbedding(2), theta, x, TINY)
-    opt = make_optimizer(1e-3, 1e-4, 5.0)
+    theta, x, flow0, opt = _tiny_problem(getkey, 128)
     keys = jax.random.split(getkey(), 4)
     batches = tuple(a.reshape(4, 32, *a.shape[1:]) for a in (theta, x, np.ones(128, bool)))
     for loss in (MaximumLikelihoodLoss(), AtomicLoss(num_atoms=4)):

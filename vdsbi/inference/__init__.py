@@ -46,7 +46,6 @@ from ._standardize import Standardizer as Standardizer
 from ._summaries import DEFAULT_LAGS as DEFAULT_LAGS, summary_statistics as summary_statistics
 from ._train import (
     TRACE_COUNTS as TRACE_COUNTS,
-    eval_loss as eval_loss,
     eval_steps as eval_steps,
     fit as fit,
     init_opt_state as init_opt_state,

@@ -68,12 +68,6 @@ def train_steps(flow: ConditionalFlow, opt_state, batches, keys, loss: AbstractL
 
 
 @eqx.filter_jit
-def eval_loss(flow: ConditionalFlow, batch, key: PRNGKeyArray, loss: AbstractLoss):
-    TRACE_COUNTS["eval_loss"] += 1
-    return loss(flow, *batch, key)
-
-
-@eqx.filter_jit
 def eval_steps(flow: ConditionalFlow, batches, key: PRNGKeyArray, loss: AbstractLoss):
     """Mean loss over ``(num_batches, batch, ...)`` validation batches, in one compiled loop."""
     TRACE_COUNTS["eval_steps"] += 1
