@@ -56,7 +56,7 @@ def test_noise_std_recovers_white_noise(sigma):
 
 @pytest.mark.parametrize(
     "name, min_usable",
-    [("vw_gti_low_speed", 20.0), ("vw_gti_high_speed_2", 250.0)],
+    [("vw_gti_low_speed", 20.0), ("vw_gti_high_speed_2", 80.0)],
 )
 def test_real_recordings_segments_and_noise(name, min_usable):
     if not (REAL / name).exists():
