@@ -164,3 +164,18 @@ def test_real_recordings_pass(name, rate):
     assert vehicle.wheelbase == pytest.approx(2.631)
     # Both time bases are right now (high_speed_2 was re-converted at 1 kHz): no kinematics warning.
     assert rec.warnings == []
+
+
+def test_stretched_time_base_is_flagged():
+    # The earlier copy of vw_gti_high_speed_2 had its 1-kHz samples stamped at 5 ms: the
+    # kinematics (d(vx)/dt against ax) must reveal that as a time-base warning naming ≈ 1 kHz.
+    path = REAL / "vw_gti_high_speed_2" / "recording.csv"
+    if not path.exists():
+        pytest.skip("real recordings not available")
+    frame = pd.read_csv(path)
+    cols = {c: frame[c].to_numpy() for c in frame.columns}
+    cols["t"] = cols["t"] * 5.0
+    rec = build_recording(cols, "stretched")
+    (warning,) = [w for w in rec.warnings if "time base" in w]
+    rate = float(warning.split("true rate ")[1].split(" Hz")[0])
+    assert rate == pytest.approx(1000.0, rel=0.05)
