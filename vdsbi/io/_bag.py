@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from ..simulator._vehicle import CHANNELS, INPUTS
+from ..simulator import CHANNELS, INPUTS
 from ._errors import InputError
 from ._recording import Recording, build_recording
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..simulator._vehicle import Vehicle
+from ..simulator import Vehicle
 from ._bag import is_bag, read_bag
 from ._csv import read_csv
 from ._errors import InputError

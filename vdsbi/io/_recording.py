@@ -10,7 +10,7 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 import pandas as pd
 
-from ..simulator._vehicle import CHANNELS, INPUTS
+from ..simulator import CHANNELS, INPUTS
 from ._errors import InputError
 from ._resample import check_uniform, resample
 
@@ -100,7 +100,7 @@ class Recording:
 
     def inputs(self):
         """The driver inputs as a `vdsbi.simulator.Inputs` on this grid."""
-        from ..simulator._inputs import Inputs
+        from ..simulator import Inputs
 
         return Inputs(self.t[0], self.dt, self.steer, self.torque_front, self.torque_rear)
 

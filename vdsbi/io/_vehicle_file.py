@@ -6,7 +6,7 @@ import json
 import os
 from pathlib import Path
 
-from ..simulator._vehicle import Vehicle
+from ..simulator import Vehicle
 from ._errors import InputError
 
 #: Upper limits that catch unit mistakes the Vehicle's own checks (positive, finite) let through:
