@@ -13,7 +13,7 @@ import numpy as np
 
 from ..simulator import CHANNELS, INPUTS
 from ._errors import InputError
-from ._recording import Recording, build_recording
+from ._recording import SPEED_CHANNELS, TORQUES, Recording, build_recording
 
 #: Autoware message definitions (autoware_vehicle_msgs), not in rosbags' built-in typestores.
 AUTOWARE_MSGS: dict[str, str] = {
@@ -155,7 +155,12 @@ def read_bag_columns(
     """Read mapped fields and interpolate them onto a common uniform grid at `rate`.
 
     Message times are the bag's receive (log) time stamps. The grid spans the interval all
-    mapped topics cover.
+    mapped topics cover. `steer` is required. The torques are optional but a pair: a default
+    torque topic that is absent (or silent) means no torque column; one named in a topic map
+    must be there. Without torques a speed (vx or wheel speeds) is required.
+
+    Raises:
+        InputError: naming the bag, the column and its topic (and the topic map that set it).
     """
     from rosbags.highlevel import AnyReader
 
@@ -170,14 +175,14 @@ def read_bag_columns(
                 if spec is None:
                     continue
                 if spec.topic not in topics:
-                    if col in INPUTS or spec.origin:  # required, or asked for explicitly
+                    if col == "steer" or spec.origin:  # required, or asked for explicitly
                         have = ", ".join(sorted(topics)) or "none"
                         raise InputError(
                             source,
                             col,
                             f"{spec.describe()} not in bag (topics: {have}); map it with --topic-map",
                         )
-                    continue  # a measured channel may be absent
+                    continue  # a measured channel or the torque pair may be absent
                 wanted.setdefault(spec.topic, []).append((col, spec))
                 series[col] = ([], [])
             conns = [topics[tp] for tp in wanted]
@@ -203,8 +208,18 @@ def read_bag_columns(
         ) from None
     present = {c: s for c, s in series.items() if len(s[0]) > 0}
     for col in INPUTS:
-        if col not in present:
+        if col in series and col not in present and (col == "steer" or topic_map[col].origin):
             raise InputError(source, col, f"{topic_map[col].describe()} has no messages")
+    _check_torque_pair(source, topic_map, series, present)
+    if not any(c in present for c in (*TORQUES, *SPEED_CHANNELS)):
+        wanted = [f"{c} ({topic_map[c].describe()})" for c in SPEED_CHANNELS if topic_map.get(c)]
+        raise InputError(
+            source,
+            "vx",
+            "no torque topics, so the longitudinal motion follows the measured speed: expected "
+            + (" or ".join(wanted) if wanted else "vx or the wheel speeds")
+            + " with messages; map it with --topic-map",
+        )
     t0 = max(min(s[0]) for s in present.values()) * 1e-9
     t1 = min(max(s[0]) for s in present.values()) * 1e-9
     if not t1 > t0:
@@ -231,6 +246,33 @@ def read_bag_columns(
     return out
 
 
+def _check_torque_pair(
+    source: str,
+    topic_map: Mapping[str, TopicField],
+    series: Mapping[str, tuple[list[int], list[float]]],
+    present: Mapping[str, object],
+) -> None:
+    """Raise if exactly one of the axle torques was read, naming the one missing and why."""
+    got = [c for c in TORQUES if c in present]
+    if len(got) != 1:
+        return
+    (col,) = [c for c in TORQUES if c not in present]
+    other = f"{got[0]} is read from {topic_map[got[0]].describe()}"
+    spec = topic_map.get(col)
+    if spec is None:
+        why = "is set to null in the topic map"
+    elif col in series:
+        why = f"{spec.describe()} has no messages"
+    else:
+        why = f"{spec.describe()} is not in the bag"
+    raise InputError(
+        source,
+        col,
+        f"{why}, but {other}: the axle torques come as a pair; map both with --topic-map, "
+        "or set both to null",
+    )
+
+
 def read_bag(
     path: str | os.PathLike,
     *,
@@ -254,8 +296,9 @@ def write_bag(
     """Write a Recording as a ROS2 bag with the default topic map (for tests and demos).
 
     IMU (sensor_msgs/Imu), VelocityReport and SteeringReport (Autoware), one std_msgs/Float64
-    per axle torque and a std_msgs/Float64MultiArray [front, rear] of wheel speeds; one message
-    per sample per topic, log time = header time = `start_ns` + t.
+    per axle torque (none for a recording without torques) and a std_msgs/Float64MultiArray
+    [front, rear] of wheel speeds; one message per sample per topic, log time = header time =
+    `start_ns` + t.
 
     Args:
         rec: the recording.
@@ -292,6 +335,8 @@ def write_bag(
         skip = (*skip, "/vehicle/status/velocity_status")
     if "omega_front" not in ch or "omega_rear" not in ch:
         skip = (*skip, "/vdsbi/wheel_speeds")
+    if not rec.has_torques:
+        skip = (*skip, "/vdsbi/torque_front", "/vdsbi/torque_rear")
     layout = ns["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
     with Writer(path, version=9, storage_plugin=plugin) as writer:
         conns = {
@@ -312,12 +357,13 @@ def write_bag(
                     ),
                     linear_acceleration_covariance=cov,
                 ),
-                "/vdsbi/torque_front": ns["std_msgs/msg/Float64"](data=float(rec.torque_front[k])),
-                "/vdsbi/torque_rear": ns["std_msgs/msg/Float64"](data=float(rec.torque_rear[k])),
                 "/vehicle/status/steering_status": ns["autoware_vehicle_msgs/msg/SteeringReport"](
                     stamp=tm, steering_tire_angle=float(rec.steer[k])
                 ),
             }
+            if rec.has_torques:
+                msgs["/vdsbi/torque_front"] = ns["std_msgs/msg/Float64"](data=float(rec.torque_front[k]))
+                msgs["/vdsbi/torque_rear"] = ns["std_msgs/msg/Float64"](data=float(rec.torque_rear[k]))
             if "/vehicle/status/velocity_status" in conns:
                 msgs["/vehicle/status/velocity_status"] = ns["autoware_vehicle_msgs/msg/VelocityReport"](
                     header=hdr,

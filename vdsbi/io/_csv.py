@@ -25,13 +25,11 @@ def read_csv_columns(path: str | os.PathLike) -> dict[str, np.ndarray]:
     except UnicodeDecodeError:
         raise InputError(source, "file", "not UTF-8 text; expected a comma-separated text file") from None
     if not first.strip():
-        raise InputError(source, "header", "file is empty; expected a header row t,steer,torque_front,...")
+        raise InputError(source, "header", "file is empty; expected a header row t,steer,...")
     header = next(csv.reader([first]))
     names = [h.strip() for h in header]
     if all(_is_number(c) for c in names):
-        raise InputError(
-            source, "header", "the first row holds numbers; expected a header row t,steer,torque_front,..."
-        )
+        raise InputError(source, "header", "the first row holds numbers; expected a header row t,steer,...")
     dup = sorted({c for c in names if names.count(c) > 1 and c})
     if dup:
         raise InputError(source, dup[0], "duplicated column; expected each column once")

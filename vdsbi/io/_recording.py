@@ -14,7 +14,17 @@ from ..simulator import CHANNELS, INPUTS
 from ._errors import InputError
 from ._resample import check_uniform, resample
 
-REQUIRED: tuple[str, ...] = ("t", *INPUTS)
+#: Columns every recording has.
+REQUIRED: tuple[str, ...] = ("t", "steer")
+#: Axle torques: optional, but a pair (both or neither).
+TORQUES: tuple[str, ...] = tuple(c for c in INPUTS if c != "steer")
+#: Channels a speed follows from (`vx`, else the wheel speeds × radius): one is required
+#: without torques, since the longitudinal motion then follows the measured speed.
+SPEED_CHANNELS: tuple[str, ...] = ("vx", "omega_front", "omega_rear")
+#: How the longitudinal motion is driven: by the applied wheel torques, or by the measured speed.
+LONGITUDINAL_MODES: tuple[str, ...] = ("torque", "speed")
+#: Window, s, of the local quadratic fit whose slope is the acceleration when `ax` is absent.
+ACCEL_WINDOW = 0.2
 MIN_MEASURED = 2
 #: Shortest accepted recording, s: the slowest dynamics of interest (yaw, wheel spin-up) settle
 #: in well under a second, so less cannot inform the parameters.
@@ -54,8 +64,9 @@ class Recording:
     Attributes:
         t: (T,) time stamps, s, uniform at `dt` = 1/`rate`.
         steer: (T,) front road-wheel angle, rad.
-        torque_front: (T,) total front-axle wheel torque, N·m.
-        torque_rear: (T,) total rear-axle wheel torque, N·m.
+        torque_front: (T,) total front-axle wheel torque, N·m, or None if the recording has
+            no torques (then `torque_rear` is None too).
+        torque_rear: (T,) total rear-axle wheel torque, N·m, or None.
         channels: measured channels present, name -> (T,) array in SI units (a subset of
             `CHANNELS`, in `CHANNELS` order).
         source: where it came from (file name), used in messages.
@@ -66,13 +77,22 @@ class Recording:
 
     t: np.ndarray
     steer: np.ndarray
-    torque_front: np.ndarray
-    torque_rear: np.ndarray
+    torque_front: np.ndarray | None
+    torque_rear: np.ndarray | None
     channels: dict[str, np.ndarray]
     source: str
     rate: float
     original_rate: float
     warnings: list[str] = dataclasses.field(default_factory=list)
+
+    def __post_init__(self):
+        if (self.torque_front is None) != (self.torque_rear is None):
+            raise ValueError(f"{self.source}: torque_front and torque_rear must both be arrays or both None")
+
+    @property
+    def has_torques(self) -> bool:
+        """Whether the recording carries the applied axle torques."""
+        return self.torque_front is not None
 
     @property
     def dt(self) -> float:
@@ -98,11 +118,45 @@ class Recording:
             raise KeyError(f"{self.source}: channel(s) {missing} not in recording {self.channel_names}")
         return np.stack([self.channels[n] for n in names], axis=-1)
 
-    def inputs(self):
-        """The driver inputs as a `vdsbi.simulator.Inputs` on this grid."""
+    def inputs(self, *, longitudinal: str | None = None, wheel_radius: float | None = None):
+        """The driver inputs as a `vdsbi.simulator.Inputs` on this grid.
+
+        Args:
+            longitudinal: "torque" (the wheels are driven by the recorded torques) or "speed"
+                (the longitudinal motion follows the measured speed); default "torque" if the
+                recording has torques, else "speed".
+            wheel_radius: m, turns wheel speeds into a speed in "speed" mode when `vx` is absent.
+
+        Returns:
+            "torque": `Inputs(t0, dt, steer, torque_front, torque_rear)`. "speed": the same with
+            the recorded torques (zeros without them) and `speed` (T,) m/s from `speed()`,
+            `accel` (T,) m/s²: the measured `ax`, else the slope of the speed over
+            `ACCEL_WINDOW` s.
+
+        Raises:
+            InputError: "torque" without torques, or "speed" without a speed.
+            ValueError: an unknown `longitudinal`.
+        """
         from ..simulator import Inputs
 
-        return Inputs(self.t[0], self.dt, self.steer, self.torque_front, self.torque_rear)
+        mode = self._longitudinal(longitudinal)
+        if mode == "torque":
+            return Inputs(self.t[0], self.dt, self.steer, self.torque_front, self.torque_rear)
+        return Inputs(**_speed_inputs(self, wheel_radius))
+
+    def _longitudinal(self, longitudinal: str | None) -> str:
+        if longitudinal is None:
+            return "torque" if self.has_torques else "speed"
+        if longitudinal not in LONGITUDINAL_MODES:
+            raise ValueError(f"longitudinal must be one of {list(LONGITUDINAL_MODES)}, got {longitudinal!r}")
+        if longitudinal == "torque" and not self.has_torques:
+            raise InputError(
+                self.source,
+                "torque_front",
+                "no torque columns, so the wheels cannot be driven by torques; expected torque_front "
+                "and torque_rear, or the speed-driven mode (longitudinal='speed')",
+            )
+        return longitudinal
 
     def speed(self, wheel_radius: float | None = None) -> np.ndarray | None:
         """(T,) forward speed, m/s: `vx` if present, else mean wheel speed × `wheel_radius`."""
@@ -122,15 +176,17 @@ class Recording:
             self,
             t=self.t[m].copy(),
             steer=self.steer[m].copy(),
-            torque_front=self.torque_front[m].copy(),
-            torque_rear=self.torque_rear[m].copy(),
+            torque_front=None if self.torque_front is None else self.torque_front[m].copy(),
+            torque_rear=None if self.torque_rear is None else self.torque_rear[m].copy(),
             channels={k: v[m].copy() for k, v in self.channels.items()},
             warnings=list(self.warnings),
         )
 
     def to_frame(self) -> pd.DataFrame:
-        cols = {"t": self.t, "steer": self.steer, "torque_front": self.torque_front}
-        cols["torque_rear"] = self.torque_rear
+        """The contract's columns (no torque columns for a recording without torques)."""
+        cols = {"t": self.t, "steer": self.steer}
+        if self.has_torques:
+            cols.update(torque_front=self.torque_front, torque_rear=self.torque_rear)
         cols.update(self.channels)
         return pd.DataFrame(cols)
 
@@ -143,6 +199,48 @@ class Recording:
         self.to_frame().to_parquet(path, index=False)
 
 
+def _speed_inputs(rec: Recording, wheel_radius: float | None) -> dict[str, object]:
+    """Keyword arguments of `Inputs` for the speed-driven mode (see `Recording.inputs`)."""
+    speed = rec.speed(wheel_radius)
+    if speed is None:
+        if any(c in rec.channels for c in SPEED_CHANNELS):
+            what = "no vx channel, and the speed from the wheel speeds needs the vehicle's wheel_radius"
+        else:
+            what = "no vx or wheel-speed channel; the speed-driven mode follows the measured speed"
+        raise InputError(rec.source, "vx", what)
+    if "ax" in rec.channels:
+        accel = rec.channels["ax"]
+    else:
+        accel = speed_slope(speed, rec.dt)
+    zero = np.zeros_like(rec.steer)
+    return {
+        "t0": rec.t[0],
+        "dt": rec.dt,
+        "steer": rec.steer,
+        "torque_front": zero if rec.torque_front is None else rec.torque_front,
+        "torque_rear": zero if rec.torque_rear is None else rec.torque_rear,
+        "speed": speed,
+        "accel": accel,
+    }
+
+
+def speed_slope(speed: np.ndarray, dt: float, window: float = ACCEL_WINDOW) -> np.ndarray:
+    """(T,) time derivative, m/s², of a (T,) speed: slope of a local quadratic over `window` s.
+
+    A Savitzky–Golay derivative: flat to ~2 Hz at 0.2 s, so speed quantisation and noise do not
+    turn into large accelerations while braking and throttle transients survive.
+    """
+    from scipy.signal import savgol_filter
+
+    n = speed.shape[0]
+    w = max(5, int(round(window / dt)) | 1)
+    if w > n:
+        w = n if n % 2 else n - 1
+    if w < 3:
+        return np.gradient(speed, dt) if n > 1 else np.zeros_like(speed)
+    return savgol_filter(speed, w, min(2, w - 1), deriv=1, delta=dt, mode="interp")
+
+
 def _running_median(x: np.ndarray, n: int) -> np.ndarray:
     if n <= 1:
         return x
@@ -153,9 +251,11 @@ def _where(t: np.ndarray, i: int) -> str:
     return f"row {i + 1} (t = {t[i]:.6g} s)"
 
 
-def _missing_column_error(source: str, name: str, found: list[str]) -> InputError:
+def _missing_column_error(
+    source: str, name: str, found: list[str], what: str = "missing required column"
+) -> InputError:
     hint = ""
-    close = difflib.get_close_matches(name, found, n=1, cutoff=0.6)
+    close = difflib.get_close_matches(name, _unknown(found), n=1, cutoff=0.6)
     lowered = {c.strip().lower(): c for c in found}
     if name in lowered and lowered[name] != name:
         hint = f" (found '{lowered[name]}': names are case- and space-sensitive)"
@@ -166,7 +266,26 @@ def _missing_column_error(source: str, name: str, found: list[str]) -> InputErro
     elif found and all(_is_number(c) for c in found):
         hint = " (the first row holds numbers: is the header row missing?)"
     shown = ", ".join(found[:12]) + (", ..." if len(found) > 12 else "")
-    return InputError(source, name, f"missing required column{hint}; found columns: {shown}")
+    return InputError(source, name, f"{what}{hint}; found columns: {shown}")
+
+
+def _unknown(found: list[str]) -> list[str]:
+    """The found columns that are not contract names (a contract name is no misspelling)."""
+    known = {"t", *INPUTS, *CHANNELS}
+    return [c for c in found if c not in known]
+
+
+def _near(names: tuple[str, ...], found: list[str], cutoff: float) -> str:
+    """Hints "'x' for 'name', ..." for found columns close to (not equal to) the wanted `names`."""
+    pairs = []
+    for name in names:
+        if name in found:
+            continue
+        close = difflib.get_close_matches(name, _unknown(found), n=1, cutoff=cutoff)
+        lowered = [c for c in found if c.strip().lower() == name]
+        if lowered or close:
+            pairs.append(f"'{(lowered or close)[0]}' for '{name}'")
+    return ", ".join(pairs)
 
 
 def _is_number(s: str) -> bool:
@@ -196,15 +315,31 @@ def build_recording(
     source = str(source)
     found = [str(c) for c in columns]
     if found and all(_is_number(c) for c in found):
-        raise InputError(
-            source, "header", "the first row holds numbers; expected a header row t,steer,torque_front,..."
-        )
+        raise InputError(source, "header", "the first row holds numbers; expected a header row t,steer,...")
     dup = sorted({c for c in found if found.count(c) > 1})
     if dup:
         raise InputError(source, dup[0], "duplicated column; expected each column once")
     for name in REQUIRED:
         if name not in columns:
             raise _missing_column_error(source, name, found)
+    torques = [c for c in TORQUES if c in columns]
+    if len(torques) == 1:
+        (missing,) = [c for c in TORQUES if c not in columns]
+        raise _missing_column_error(
+            source,
+            missing,
+            found,
+            f"missing column: {torques[0]} is given without it, but the axle torques come as a pair "
+            "(both or neither)",
+        )
+    warnings = []
+    if not torques:
+        near = _near(TORQUES, found, cutoff=0.8)
+        if near:
+            warnings.append(
+                f"{source}: {', '.join(TORQUES)}: no torque columns, read without torques "
+                f"(found {near}: misspelled?)"
+            )
     present = [c for c in CHANNELS if c in columns]
     if len(present) < MIN_MEASURED:
         missing = [c for c in CHANNELS if c not in columns]
@@ -216,7 +351,18 @@ def build_recording(
             f"found {present or 'none'} of {list(CHANNELS)}; expected at least {MIN_MEASURED}"
             + (f" (misspelled: {', '.join(hints)})" if hints else ""),
         )
-    names = [*REQUIRED, *present]
+    if not torques and not any(c in columns for c in SPEED_CHANNELS):
+        near = _near((*TORQUES, *SPEED_CHANNELS), found, cutoff=0.6)
+        raise InputError(
+            source,
+            "vx",
+            "no torque columns (torque_front, torque_rear), so the longitudinal motion follows the "
+            "measured speed: expected vx or the wheel speeds omega_front, omega_rear"
+            + (f" (found {near}: misspelled?)" if near else "")
+            + f"; found columns: {', '.join(found[:12])}"
+            + (", ..." if len(found) > 12 else ""),
+        )
+    names = [*REQUIRED, *torques, *present]
     data: dict[str, np.ndarray] = {}
     for name in names:
         x = np.asarray(columns[name])
@@ -295,12 +441,13 @@ def build_recording(
     rec = Recording(
         t=t_new,
         steer=out["steer"],
-        torque_front=out["torque_front"],
-        torque_rear=out["torque_rear"],
+        torque_front=out.get("torque_front"),
+        torque_rear=out.get("torque_rear"),
         channels={c: out[c] for c in present},
         source=source,
         rate=float(rate),
         original_rate=float(original_rate),
+        warnings=warnings,
     )
     rec.warnings.extend(consistency_warnings(rec))
     return rec

@@ -57,7 +57,8 @@ def find_segments(
     A sample is usable where the speed (vx, else mean wheel speed × `wheel_radius`), averaged
     over 0.5 s, is at least `min_speed` (the tire-slip model is singular near standstill) and
     the inputs excite the dynamics: over a centred `window` the steering std is at least
-    `min_steer_std` or the total axle torque std at least `min_torque_std`. Quiet spells shorter
+    `min_steer_std` or the total axle torque std at least `min_torque_std` (without torques,
+    the steering alone decides). Quiet spells shorter
     than `max_quiet` between excited stretches are kept (the model runs through them). Runs of
     usable samples shorter than `min_duration` are rejected; longer ones are split into equal
     pieces no longer than `max_duration` if given.
@@ -76,15 +77,17 @@ def find_segments(
     n_win = max(2, int(round(window * rec.rate)))
     fast = _rolling(speed, n_speed, "mean") >= min_speed
     steer_std = _rolling(rec.steer, n_win, "std")
-    torque_std = _rolling(rec.torque_front + rec.torque_rear, n_win, "std")
-    excited = (steer_std >= min_steer_std) | (torque_std >= min_torque_std)
+    excited = steer_std >= min_steer_std
+    if rec.has_torques:
+        excited |= _rolling(rec.torque_front + rec.torque_rear, n_win, "std") >= min_torque_std
     n_quiet = int(round(max_quiet * rec.rate))
     runs = _runs(excited)
     for k, (i0, i1) in enumerate(runs):
         if not excited[i0] and 0 < k < len(runs) - 1 and i1 - i0 <= n_quiet:
             excited[i0:i1] = True
     label = np.where(~fast, 1, np.where(~excited, 2, 0))
-    reasons = {1: f"speed below {min_speed:g} m/s", 2: "no excitation (steady steer and torque)"}
+    steady = "steady steer and torque" if rec.has_torques else "steady steer"
+    reasons = {1: f"speed below {min_speed:g} m/s", 2: f"no excitation ({steady})"}
     out: list[Segment] = []
     for i0, i1 in _runs(label):
         a, b = float(t[i0]), float(t[i1 - 1])
