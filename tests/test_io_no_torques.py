@@ -12,10 +12,10 @@ from vdsbi.io import (
     find_segments,
     load_drive,
     read_recording,
+    speed_slope,
     usable_segments,
     write_bag,
 )
-from vdsbi.io._recording import speed_slope
 from vdsbi.simulator import Inputs
 
 DATA = Path(__file__).parent / "data"

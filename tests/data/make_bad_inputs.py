@@ -71,6 +71,10 @@ def write_recordings(m: dict) -> None:
 
     bad("missing_steer.csv", "steer", g.drop(columns="steer"))
     bad("misspelled_torque_front.csv", "torque_front", g.rename(columns={"torque_front": "torque_frnt"}))
+    # Torques are optional, but a pair; without them a speed (vx or wheel speeds) is required.
+    bad("torque_rear_without_front.csv", "torque_front", g.drop(columns="torque_front"), contains="pair")
+    no_speed = g.drop(columns=["torque_front", "torque_rear", "vx", "omega_front", "omega_rear"])
+    bad("no_torques_no_speed.csv", "vx", no_speed, contains="follows the measured speed")
     bad("wrong_case_steer.csv", "steer", g.rename(columns={"steer": "Steer"}))
     bad("missing_t.csv", "t", g.rename(columns={"t": "time"}))
     one = g[["t", "steer", "torque_front", "torque_rear", "ax"]]
@@ -219,6 +223,13 @@ def write_bags(m: dict) -> None:
         skip=("/vehicle/status/steering_status", "/vdsbi/torque_front", "/vdsbi/torque_rear"),
     )
     m[name] = {"field": "steer", "role": "recording"}
+    name = "bag_one_torque_topic"
+    write_bag(rec, BAD / name, storage="mcap", skip=("/vdsbi/torque_rear",))
+    m[name] = {"field": "torque_rear", "role": "recording", "contains": "pair"}
+    name = "bag_without_torques_or_speed"
+    speeds = ("/vehicle/status/velocity_status", "/vdsbi/wheel_speeds")
+    write_bag(rec, BAD / name, storage="mcap", skip=("/vdsbi/torque_front", "/vdsbi/torque_rear", *speeds))
+    m[name] = {"field": "vx", "role": "recording", "contains": "follows the measured speed"}
     gap = build_recording(
         {c: g[c].to_numpy() for c in g.columns if c not in ("omega_front", "omega_rear")}, "x", rate=50.0
     )

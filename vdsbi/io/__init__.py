@@ -19,9 +19,11 @@ from ._errors import InputError as InputError
 from ._parquet import read_parquet as read_parquet
 from ._recording import (
     LIMITS as LIMITS,
+    LONGITUDINAL_MODES as LONGITUDINAL_MODES,
     Recording as Recording,
     build_recording as build_recording,
     kinematic_slopes as kinematic_slopes,
+    speed_slope as speed_slope,
 )
 from ._segments import (
     Segment as Segment,

@@ -88,7 +88,9 @@ def load_topic_map(
 ) -> dict[str, TopicField]:
     """Defaults updated by a mapping (or a YAML/JSON file) ``column: {topic, field[, scale]}``.
 
-    A column mapped to ``null`` is not read. Unknown column names are rejected, since a typo
+    A column mapped to ``null`` is not read (the torques only as a pair: both ``null`` reads a
+    bag without torques). A column mapped here must be in the bag; the default torque and
+    measured-channel topics may be absent. Unknown column names are rejected, since a typo
     would otherwise silently fall back to the default topic.
 
     Raises:
