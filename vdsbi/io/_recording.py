@@ -343,8 +343,8 @@ def build_recording(
     present = [c for c in CHANNELS if c in columns]
     if len(present) < MIN_MEASURED:
         missing = [c for c in CHANNELS if c not in columns]
-        near = {m: difflib.get_close_matches(m, found, n=1, cutoff=0.6) for m in missing}
-        hints = [f"'{v[0]}' for '{k}'?" for k, v in near.items() if v and v[0] not in REQUIRED]
+        near = {m: difflib.get_close_matches(m, _unknown(found), n=1, cutoff=0.6) for m in missing}
+        hints = [f"'{v[0]}' for '{k}'?" for k, v in near.items() if v]
         raise InputError(
             source,
             "measured channels",
