@@ -1,6 +1,11 @@
 """Differentiable, batched bicycle-model vehicle simulator (seed eq. 1–13) with physics effects."""
 
-from ._dynamics import Args as Args, VehicleModel as VehicleModel
+from ._dynamics import (
+    LONGITUDINAL_MODES as LONGITUDINAL_MODES,
+    Args as Args,
+    VehicleModel as VehicleModel,
+    steady_lateral_state as steady_lateral_state,
+)
 from ._effects import (
     EFFECTS as EFFECTS,
     AbstractEffect as AbstractEffect,
@@ -8,6 +13,7 @@ from ._effects import (
     get_effect as get_effect,
     register_effect as register_effect,
 )
+from ._filter import Decimator as Decimator
 from ._inputs import Inputs as Inputs
 from ._profiles import (
     constant_profile as constant_profile,
@@ -21,7 +27,6 @@ from ._sensors import (
     sensor_noise as sensor_noise,
 )
 from ._solve import (
-    RK4 as RK4,
     TRACE_COUNT as TRACE_COUNT,
     Solver as Solver,
     check_inputs as check_inputs,

@@ -9,6 +9,13 @@ Conventions where the seed is ambiguous or wrong (each is also noted where it is
   * eq. 11's load transfer m·h·a_x/L uses the specific force a_x (tire and other
     non-gravitational forces / m), solved by fixed-point iteration since a_x depends on the
     loads through Dugoff's f(λ).
+
+Two longitudinal modes (`VehicleModel.longitudinal`):
+  * "torque" (the seed): the wheels are driven by the applied axle torques;
+  * "speed" (real logs without torques): Vx is the measured speed and a_x the measured
+    specific force, both given in `Inputs`; the tires roll freely (κ = 0) and only the
+    lateral and yaw dynamics are simulated. The state layout stays the same so that effects
+    keep their state slots.
 """
 
 from __future__ import annotations
@@ -38,11 +45,42 @@ class Args(NamedTuple):
     inputs: Inputs
 
 
+LONGITUDINAL_MODES: tuple[str, ...] = ("torque", "speed")
+
+
 class VehicleModel(eqx.Module):
-    """Vehicle constants plus the enabled effects (in application order)."""
+    """Vehicle constants plus the enabled effects (in application order).
+
+    Attributes:
+        vehicle: known constants.
+        effects: enabled effects, applied in this order.
+        longitudinal: "torque" (wheels driven by `Inputs.torque_*`, the seed's model) or
+            "speed" (Vx follows `Inputs.speed`, load transfer from `Inputs.accel`, free-rolling
+            tires; for logs without applied torques).
+
+    In speed mode:
+      * Vx is the measured speed interpolated at t wherever the model needs it; the Vx state
+        integrates its slope and is otherwise unused. ω_f, ω_r integrate slope/R_eff; the
+        omega readings are Vx/R_eff at the current load. κ̂ states stay 0.
+      * the loads use m·h·a_x/L with the measured a_x; there are no longitudinal tire forces,
+        so C_kappa_f, C_kappa_r have no effect at all and h_cog acts only through the loads.
+      * readings: ax is the measured accel (an input, so inference should not condition on it)
+        passed through the measurement effects; ay and yaw_rate are simulated; vx is the
+        measured speed; omega_* as above.
+      * effects: measurement, steering and gravity-along-y (bank) effects act as in torque
+        mode; wheel torques, torque inputs, longitudinal body forces and gravity along x
+        (grade) cannot change Vx, which is measured.
+    """
 
     vehicle: Vehicle
     effects: tuple[AbstractEffect, ...] = eqx.field(static=True, default=())
+    longitudinal: str = eqx.field(static=True, default="torque")
+
+    def __check_init__(self):
+        if self.longitudinal not in LONGITUDINAL_MODES:
+            raise ValueError(
+                f"model: longitudinal must be one of {LONGITUDINAL_MODES}, got {self.longitudinal!r}"
+            )
 
     @property
     def num_states(self) -> int:
@@ -70,27 +108,72 @@ class VehicleModel(eqx.Module):
         # Eq. 6 with R_l = R_f − F_z/C_vert: R_eff = R_f − F_z/(3·C_vert).
         return r_free - fz / (3.0 * self.vehicle.tire_vertical_stiffness)
 
-    def initial_state(self, theta, effect_params, inputs: Inputs, v0) -> Float[Array, " S"]:
-        """Vx = v0, Vy = r = 0, ω = v0/R_eff at static load, slips 0, effect states at rest."""
+    def initial_state(self, theta, effect_params, inputs: Inputs, v0, lateral0=None) -> Float[Array, " S"]:
+        """State at `inputs.t0`.
+
+        Args:
+            theta: (6,) identified parameters.
+            effect_params: one parameter vector per enabled effect.
+            inputs: driver inputs.
+            v0: initial speed, m/s (torque mode; speed mode takes the measured speed at t0).
+            lateral0: optional (2,) (Vy0 m/s, r0 rad/s). None: Vy = r = 0 and relaxed slips 0
+                (the seed's start from straight running). Given: the relaxed slips start at
+                the kinematic slip angles, so a window started mid-corner has no start-up
+                transient.
+
+        Returns:
+            (S,): Vx, Vy, r, ω_f, ω_r (Vx/R_eff at static load in torque mode, at the measured
+            a_x's load in speed mode), α̂_f, α̂_r, κ̂ = 0, then the effect states at rest.
+        """
         r_free = self.radius(effect_params)
-        fzf, fzr = self.static_loads(theta)
+        u0 = inputs(inputs.t0)
+        if self.longitudinal == "speed":
+            v0, _, a_x0 = inputs.longitudinal(inputs.t0)
+            fzf, fzr = self.loads(theta, a_x0)
+        else:
+            fzf, fzr = self.static_loads(theta)
         v0 = jnp.asarray(v0, dtype=float)
+        zero = jnp.zeros_like(v0)
+        extra = [e.init_state(p, u0) for e, p in zip(self.effects, effect_params)]
+        if lateral0 is None:
+            vy0, r0, a_f0, a_r0 = zero, zero, zero, zero
+        else:
+            lateral0 = jnp.asarray(lateral0, dtype=v0.dtype)
+            vy0, r0 = lateral0[0], lateral0[1]
+            # The acting steer at t0: the recorded one after input effects (e.g. a lag
+            # starting from its own initial state).
+            u = u0
+            for e, p, z in zip(self.effects, effect_params, extra):
+                u = e.inputs(p, z, u)
+            l_f = theta[0]
+            l_r = self.vehicle.wheelbase - l_f
+            vx_pos = jnp.maximum(v0, V_FLOOR)
+            a_f0 = u[0] - jnp.arctan((vy0 + l_f * r0) / vx_pos)
+            a_r0 = -jnp.arctan((vy0 - l_r * r0) / vx_pos)
         base = jnp.stack(
             [
                 v0,
-                jnp.zeros_like(v0),
-                jnp.zeros_like(v0),
+                vy0,
+                r0,
                 v0 / self.effective_radius(r_free, fzf),
                 v0 / self.effective_radius(r_free, fzr),
+                a_f0,
+                a_r0,
             ]
-            + [jnp.zeros_like(v0)] * 4
+            + [zero] * 2
         )
-        u0 = inputs(inputs.t0)
-        extra = [e.init_state(p, u0) for e, p in zip(self.effects, effect_params)]
         return jnp.concatenate([base, *extra]) if extra else base
 
+    def loads(self, theta, a_x):
+        """Axle loads (N) under the specific force a_x (m/s²), eq. 11."""
+        fz_f0, fz_r0 = self.static_loads(theta)
+        shift = self.vehicle.mass * theta[1] * a_x / self.vehicle.wheelbase
+        return fz_f0 - shift, fz_r0 + shift
+
     def evaluate(self, t, y, args: Args):
-        """Returns (dy/dt, sensor readings {channel: value})."""
+        """Returns (dy/dt (S,), sensor readings (6,) in CHANNELS order)."""
+        if self.longitudinal == "speed":
+            return self._evaluate_speed(t, y, args)
         theta, effect_params, inputs = args
         veh = self.vehicle
         m, L, mu = veh.mass, veh.wheelbase, veh.friction
@@ -210,8 +293,119 @@ class VehicleModel(eqx.Module):
             readings = e.measure(p, readings, ctx)
         return dy, jnp.stack([readings[c] for c in CHANNELS])
 
+    def _evaluate_speed(self, t, y, args: Args):
+        # Speed mode (see the class docstring): Vx and a_x are measured, κ = 0, no wheel torques.
+        theta, effect_params, inputs = args
+        veh = self.vehicle
+        m, L, mu = veh.mass, veh.wheelbase, veh.friction
+        vy, r, a_f_hat, a_r_hat = y[1], y[2], y[5], y[6]
+        vx, dvx, a_x = inputs.longitudinal(t)
+        zs = self._effect_states(y)
+        u_cmd = inputs(t)
+        u = u_cmd
+        for e, p, z in zip(self.effects, effect_params, zs):
+            u = e.inputs(p, z, u)
+        delta = u[0]
+        l_f, _, _, _, caf, car = (theta[i] for i in range(6))
+        l_r = L - l_f
+        i_z = m * l_f * l_r
+        r_free = self.radius(effect_params)
+        # Eq. 11 with the measured specific force: no fixed point to solve.
+        fz_f, fz_r = self.loads(theta, a_x)
+        r_eff_f = self.effective_radius(r_free, fz_f)
+        r_eff_r = self.effective_radius(r_free, fz_r)
+        zero = jnp.zeros_like(vx)
+        ctx = Context(
+            vx=vx,
+            vy=vy,
+            r=r,
+            r_dot=zero,
+            fz_front=fz_f,
+            fz_rear=fz_r,
+            r_eff_front=r_eff_f,
+            r_eff_rear=r_eff_r,
+            # Free rolling: the wheels turn at Vx/R_eff whatever the ω states hold.
+            omega_front=vx / r_eff_f,
+            omega_rear=vx / r_eff_r,
+            mass=jnp.asarray(m),
+            gravity=GRAVITY,
+        )
+        fby, gy = zero, zero
+        for e, p in zip(self.effects, effect_params):
+            # The x components would change Vx, which is measured here: dropped.
+            fby = fby + e.body_force(p, ctx)[1]
+            gy = gy + e.gravity_accel(p, ctx)[1]
+
+        cos_d, sin_d = jnp.cos(delta), jnp.sin(delta)
+        # κ = 0 as a constant (not the κ̂ states), so C_kappa_* have an exactly zero gradient.
+        fx_f, fy_f = dugoff_with_load(dugoff_demand(theta[2], caf, zero, a_f_hat), fz_f, mu)
+        fx_r, fy_r = dugoff_with_load(dugoff_demand(theta[3], car, zero, a_r_hat), fz_r, mu)
+        a_y = (fx_f * sin_d + fy_f * cos_d + fy_r + fby) / m
+
+        vx_pos = jnp.maximum(vx, V_FLOOR)
+        alpha_f = delta - jnp.arctan((vy + l_f * r) / vx_pos)
+        alpha_r = -jnp.arctan((vy - l_r * r) / vx_pos)
+        rate = jnp.maximum(vx, 0.0) / veh.relaxation_length
+
+        dvy = a_y + gy - vx * r
+        dr = (l_f * (fx_f * sin_d + fy_f * cos_d) - l_r * fy_r) / i_z
+        d_base = jnp.stack(
+            [
+                dvx,
+                dvy,
+                dr,
+                # dR_eff/dt is left out: the ω states are bookkeeping, unused in this mode.
+                dvx / r_eff_f,
+                dvx / r_eff_r,
+                rate * (alpha_f - a_f_hat),
+                rate * (alpha_r - a_r_hat),
+                zero,
+                zero,
+            ]
+        )
+        d_extra = [e.state_rhs(p, z, u_cmd) for e, p, z in zip(self.effects, effect_params, zs)]
+        dy = jnp.concatenate([d_base, *d_extra]) if d_extra else d_base
+
+        readings = {
+            "ax": a_x,
+            "ay": a_y,
+            "yaw_rate": r,
+            "omega_front": ctx.omega_front,
+            "omega_rear": ctx.omega_rear,
+            "vx": vx,
+        }
+        ctx = ctx._replace(r_dot=dr)
+        for e, p in zip(self.effects, effect_params):
+            readings = e.measure(p, readings, ctx)
+        return dy, jnp.stack([readings[c] for c in CHANNELS])
+
     def vector_field(self, t, y, args: Args):
         return self.evaluate(t, y, args)[0]
 
     def sensors(self, t, y, args: Args):
         return self.evaluate(t, y, args)[1]
+
+
+def steady_lateral_state(
+    theta: Float[Array, "6"], vehicle: Vehicle, vx: Float[Array, "*B"], yaw_rate: Float[Array, "*B"]
+) -> tuple[Float[Array, "*B"], Float[Array, "*B"]]:
+    """Linear single-track steady state (Vy, r) that carries a measured yaw rate.
+
+    In steady cornering a_y = vx·r and the rear axle carries F_yr = m·a_y·l_f/L, so its slip
+    is α_r = m·vx·r·l_f/(L·C_αr) and Vy = l_r·r − vx·α_r (small angles). A θ-dependent,
+    differentiable start for windows that begin mid-corner (`lateral0`).
+
+    Args:
+        theta: (6,) identified parameters (uses l_f and C_alpha_r).
+        vehicle: vehicle constants.
+        vx: longitudinal speed, m/s (any shape broadcasting with `yaw_rate`).
+        yaw_rate: measured yaw rate, rad/s.
+
+    Returns:
+        (Vy m/s, r rad/s), broadcast to a common shape.
+    """
+    m, L = vehicle.mass, vehicle.wheelbase
+    l_f, c_alpha_r = theta[0], theta[5]
+    vx, r = jnp.broadcast_arrays(jnp.asarray(vx, dtype=float), jnp.asarray(yaw_rate, dtype=float))
+    alpha_r = m * vx * r * l_f / (L * c_alpha_r)
+    return (L - l_f) * r - vx * alpha_r, r

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import ClassVar
 
 import diffrax
 import equinox as eqx
@@ -14,25 +13,10 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from jaxtyping import Array, Bool, Float
 
-from ._dynamics import Args, VehicleModel
+from ._dynamics import LONGITUDINAL_MODES, Args, VehicleModel
 from ._effects import EFFECTS, get_effect
 from ._inputs import Inputs
 from ._vehicle import PARAM_NAMES, Vehicle
-
-
-class RK4(diffrax.AbstractERK):
-    """Classical 4th-order Runge–Kutta as a diffrax tableau (fixed steps, no error estimate)."""
-
-    tableau: ClassVar[diffrax.ButcherTableau] = diffrax.ButcherTableau(
-        c=np.array([0.5, 0.5, 1.0]),
-        b_sol=np.array([1 / 6, 1 / 3, 1 / 3, 1 / 6]),
-        b_error=np.zeros(4),
-        a_lower=(np.array([0.5]), np.array([0.0, 0.5]), np.array([0.0, 0.0, 1.0])),
-    )
-    interpolation_cls: ClassVar = diffrax.ThirdOrderHermitePolynomialInterpolation.from_k
-
-    def order(self, terms):
-        return 4
 
 
 class Solver(eqx.Module):
@@ -113,12 +97,34 @@ def theta_valid(theta, vehicle: Vehicle) -> Bool[Array, ""]:
     return (theta[0] > 0) & (theta[0] < vehicle.wheelbase) & jnp.all(theta[1:] > 0)
 
 
-def check_inputs(inputs: Inputs) -> None:
-    for name in ("steer", "torque_front", "torque_rear"):
+def check_inputs(inputs: Inputs, longitudinal: str = "torque") -> None:
+    """Raise ValueError naming the series if an input the mode uses is missing or non-finite.
+
+    Args:
+        inputs: driver inputs.
+        longitudinal: the model's mode; "speed" also needs `inputs.speed` and `inputs.accel`.
+    """
+    if longitudinal not in LONGITUDINAL_MODES:
+        raise ValueError(f"longitudinal: must be one of {LONGITUDINAL_MODES}, got {longitudinal!r}")
+    names = ["steer", "torque_front", "torque_rear"]
+    if longitudinal == "speed":
+        _require_measured(longitudinal, inputs)
+        names += ["speed", "accel"]
+    for name in names:
         arr = np.asarray(getattr(inputs, name))
         if not np.all(np.isfinite(arr)):
             idx = int(np.argmin(np.isfinite(arr)))
             raise ValueError(f"inputs: '{name}' is not finite at sample {idx}")
+
+
+def _require_measured(longitudinal: str, inputs: Inputs) -> None:
+    if longitudinal == "speed":
+        missing = [n for n in ("speed", "accel") if getattr(inputs, n) is None]
+        if missing:
+            raise ValueError(
+                f"inputs: longitudinal='speed' needs the measured series {missing} "
+                "(Inputs(..., speed=vx m/s, accel=ax m/s²))"
+            )
 
 
 def solve(
@@ -128,15 +134,29 @@ def solve(
     v0: Float[Array, ""],
     effect_params: tuple = (),
     solver: Solver = Solver(),
+    lateral0: Float[Array, "2"] | None = None,
 ) -> tuple[Float[Array, "T 6"], Bool[Array, ""]]:
     """Noise-free sensor readings at the input samples, and a success flag (one draw).
+
+    Args:
+        model: vehicle model (its `longitudinal` mode decides what drives Vx).
+        theta: (6,) identified parameters.
+        inputs: driver inputs; speed mode needs `speed` and `accel`.
+        v0: initial speed, m/s (ignored in speed mode: the measured speed at t0).
+        effect_params: one parameter vector per enabled effect.
+        solver: integration settings.
+        lateral0: optional (2,) initial (Vy m/s, r rad/s); None starts straight (Vy = r = 0).
 
     Returns:
         readings: (T, 6) in CHANNELS order (ax, ay, yaw_rate, omega_front, omega_rear, vx).
         ok: False if the solve failed, θ is unphysical or any value is non-finite.
+
+    Raises:
+        ValueError: (at trace time) speed mode without `inputs.speed`/`inputs.accel`.
     """
+    _require_measured(model.longitudinal, inputs)
     args = Args(theta=theta, effect_params=effect_params, inputs=inputs)
-    y0 = model.initial_state(theta, effect_params, inputs, v0)
+    y0 = model.initial_state(theta, effect_params, inputs, v0, lateral0)
     term = diffrax.ODETerm(model.vector_field)
     if solver.dt is None:
         sol = diffrax.diffeqsolve(
@@ -162,9 +182,9 @@ def solve(
         f = lambda t, y: model.vector_field(t, y, args)
 
         def rk4_step(t0, y, k1):
-            # Classical RK4 (the `RK4` tableau) written out in plain jnp: the four unrolled
-            # stages fuse better than diffrax's stage loop (~1/3 less CPU per batched step),
-            # and plain jnp supports both autodiff modes (jax.jacfwd and jax.grad).
+            # Classical RK4 written out in plain jnp rather than as a diffrax tableau: the four
+            # unrolled stages fuse better than diffrax's stage loop (~1/3 less CPU per batched
+            # step), and plain jnp supports both autodiff modes (jax.jacfwd and jax.grad).
             k2 = f(t0 + 0.5 * h, y + (0.5 * h) * k1)
             k3 = f(t0 + 0.5 * h, y + (0.5 * h) * k2)
             k4 = f(t0 + h, y + h * k3)
@@ -199,10 +219,10 @@ TRACE_COUNT = {"batch": 0}
 
 
 @eqx.filter_jit
-def _solve_batch(model, theta, inputs, v0, effect_params, solver):
+def _solve_batch(model, theta, inputs, v0, effect_params, solver, lateral0=None):
     TRACE_COUNT["batch"] += 1
-    fn = lambda th, v, ep: solve(model, th, inputs, v, ep, solver)
-    return jax.vmap(fn)(theta, v0, effect_params)
+    fn = lambda th, v, ep, lat: solve(model, th, inputs, v, ep, solver, lat)
+    return jax.vmap(fn)(theta, v0, effect_params, lateral0)
 
 
 def _shard(x, n_dev):
@@ -219,12 +239,15 @@ def solve_batch(
     v0: Float[Array, " N"],
     effect_params: tuple = (),
     solver: Solver = Solver(),
+    lateral0: Float[Array, "N 2"] | None = None,
 ) -> tuple[Float[Array, "N T 6"], Bool[Array, " N"]]:
     """Many draws at once: vmapped over draws and sharded over all jax.devices() along N.
 
-    `effect_params` holds one (N, P_e) array per enabled effect. A failed draw is flagged
-    in the returned mask; it never raises and never spoils the others.
+    `effect_params` holds one (N, P_e) array per enabled effect. `lateral0`, if given, is the
+    initial (Vy m/s, r rad/s) per draw, (N, 2) or broadcastable to it (e.g. (2,)). A failed
+    draw is flagged in the returned mask; it never raises and never spoils the others.
     """
+    _require_measured(model.longitudinal, inputs)
     theta = jnp.asarray(theta)
     n = theta.shape[0]
     v0 = jnp.broadcast_to(jnp.asarray(v0, dtype=theta.dtype), (n,))
@@ -232,6 +255,8 @@ def solve_batch(
         jnp.broadcast_to(jnp.asarray(p, dtype=theta.dtype), (n, len(e.param_names)))
         for e, p in zip(model.effects, effect_params)
     )
+    if lateral0 is not None:
+        lateral0 = jnp.broadcast_to(jnp.asarray(lateral0, dtype=theta.dtype), (n, 2))
     n_dev = jax.device_count()
     pad = (-n) % n_dev
     if pad:
@@ -239,13 +264,28 @@ def solve_batch(
         take = lambda a: jnp.concatenate([a, jnp.repeat(a[:1], pad, axis=0)])
         theta, v0 = take(theta), take(v0)
         effect_params = tuple(take(p) for p in effect_params)
-    theta, v0, effect_params = jax.tree.map(lambda a: _shard(a, n_dev), (theta, v0, effect_params))
-    ys, ok = _solve_batch(model, theta, inputs, v0, effect_params, solver)
+        lateral0 = None if lateral0 is None else take(lateral0)
+    theta, v0, effect_params, lateral0 = jax.tree.map(
+        lambda a: _shard(a, n_dev), (theta, v0, effect_params, lateral0)
+    )
+    ys, ok = _solve_batch(model, theta, inputs, v0, effect_params, solver, lateral0)
     return ys[:n], ok[:n]
 
 
-def make_model(vehicle: Vehicle, effects: Sequence[str] = ()) -> VehicleModel:
-    """Model with the named effects enabled (ValueError on unknown names)."""
+def make_model(vehicle: Vehicle, effects: Sequence[str] = (), longitudinal: str = "torque") -> VehicleModel:
+    """Model with the named effects enabled.
+
+    Args:
+        vehicle: vehicle constants.
+        effects: names of effects, applied in this order.
+        longitudinal: "torque" (wheels driven by the applied torques) or "speed" (Vx follows
+            the measured speed; the inputs must then carry `speed` and `accel`).
+
+    Raises:
+        ValueError: unknown or duplicate effect names, unknown mode.
+    """
+    if longitudinal not in LONGITUDINAL_MODES:
+        raise ValueError(f"longitudinal: must be one of {LONGITUDINAL_MODES}, got {longitudinal!r}")
     if isinstance(effects, str):
         effects = (effects,)
     for name in effects:
@@ -253,7 +293,9 @@ def make_model(vehicle: Vehicle, effects: Sequence[str] = ()) -> VehicleModel:
             get_effect(name)  # raises the clear error
     if len(set(effects)) != len(effects):
         raise ValueError(f"effects: duplicate effect names in {list(effects)}")
-    return VehicleModel(vehicle=vehicle, effects=tuple(get_effect(n) for n in effects))
+    return VehicleModel(
+        vehicle=vehicle, effects=tuple(get_effect(n) for n in effects), longitudinal=longitudinal
+    )
 
 
 def simulate(
@@ -261,10 +303,12 @@ def simulate(
     inputs: Inputs,
     vehicle: Vehicle,
     *,
-    v0: float,
+    v0: float | None = None,
     effects: Sequence[str] = (),
     effect_params: Mapping[str, object] | None = None,
     solver: Solver = Solver(),
+    longitudinal: str = "torque",
+    lateral0=None,
 ) -> tuple[np.ndarray, bool]:
     """One noise-free simulation with every input checked first (the user-facing call).
 
@@ -272,9 +316,13 @@ def simulate(
         theta: (6,) in PARAM_NAMES order.
         inputs: driver inputs.
         vehicle: vehicle constants.
-        v0: initial speed, m/s.
+        v0: initial speed, m/s (required in torque mode; ignored in speed mode).
         effects: names of effects to enable.
         effect_params: {effect: {param: value}}; missing parameters take null values.
+        solver: integration settings.
+        longitudinal: "torque" or "speed" (see `VehicleModel`); speed mode needs
+            `inputs.speed` and `inputs.accel`.
+        lateral0: optional initial (Vy m/s, r rad/s); default starts straight.
 
     Returns:
         readings (T, 6) in CHANNELS order, and whether the solve succeeded.
@@ -283,15 +331,24 @@ def simulate(
         ValueError: naming the offending field.
     """
     check_theta(theta, vehicle)
-    check_inputs(inputs)
-    if not (isinstance(v0, (int, float)) and math.isfinite(v0) and v0 > 0):
+    check_inputs(inputs, longitudinal)
+    if longitudinal == "speed":
+        v0 = 0.0  # unused: the measured speed at t0 sets the initial state
+    elif not (isinstance(v0, (int, float)) and math.isfinite(v0) and v0 > 0):
         raise ValueError(f"v0: initial speed must be a positive number, got {v0!r}")
-    model = make_model(vehicle, effects)
+    if lateral0 is not None:
+        lateral0 = np.asarray(lateral0, dtype=float)
+        if lateral0.shape != (2,) or not np.all(np.isfinite(lateral0)):
+            raise ValueError(f"lateral0: expected 2 finite values (Vy m/s, r rad/s), got {lateral0!r}")
+        lateral0 = jnp.asarray(lateral0, dtype=float)
+    model = make_model(vehicle, effects, longitudinal)
     _, params = effect_params_from(effects, effect_params)
-    ys, ok = _solve_one(model, jnp.asarray(theta, dtype=float), inputs, jnp.asarray(v0), params, solver)
+    ys, ok = _solve_one(
+        model, jnp.asarray(theta, dtype=float), inputs, jnp.asarray(v0), params, solver, lateral0
+    )
     return np.asarray(ys), bool(ok)
 
 
 @eqx.filter_jit
-def _solve_one(model, theta, inputs, v0, params, solver):
-    return solve(model, theta, inputs, v0, params, solver)
+def _solve_one(model, theta, inputs, v0, params, solver, lateral0=None):
+    return solve(model, theta, inputs, v0, params, solver, lateral0)
