@@ -1,0 +1,16 @@
+"""A recording plus a vehicle as one problem: windows, channels, noise, inputs, initial states, held-out."""
+
+from ._noise import dof_factor as dof_factor, lag1_autocorrelation as lag1_autocorrelation
+from ._problem import (
+    LONGITUDINAL_MODES as LONGITUDINAL_MODES,
+    Problem as Problem,
+    ProblemSettings as ProblemSettings,
+    make_problem as make_problem,
+)
+from ._simulate import (
+    WindowedModel as WindowedModel,
+    simulate_draws as simulate_draws,
+    windowed_model as windowed_model,
+)
+from ._validate import channel_scores as channel_scores, predict as predict, validate as validate
+from ._windows import Window as Window, choose_windows as choose_windows

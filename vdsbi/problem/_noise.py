@@ -1,0 +1,56 @@
+"""The measurement-noise model of a problem: level per channel and the residuals' correlation.
+
+Sensor noise is modelled as white at the model rate with std σ_c per channel (vehicle.json's
+`noise_std`, else estimated from the recording: everything above ≈ 5 Hz, vibration included,
+counts as noise). When the problem low-passes and decimates its channels, simulated noise goes
+through the same filter as the measurement, so what reaches the data is coloured exactly as
+the measured noise would be if it were white before filtering; the std after filtering is
+σ_c·‖h‖₂ (h the filter taps).
+
+Correlated residuals in the evidence: a χ² over N correlated samples carries the information of
+fewer independent ones. With lag-1 autocorrelation ρ of a channel's residual (AR(1) model), the
+effective number of samples is N·(1 − ρ)/(1 + ρ) (Bartlett/Bayley–Hammersley); `dof_factor`
+gives that factor, and the misspecification tests and χ²/dof figures divide by it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..io import Recording, estimate_noise_std
+from ..simulator import Vehicle
+
+
+def raw_noise_std(
+    rec: Recording, vehicle: Vehicle, channels: tuple[str, ...], segments
+) -> tuple[np.ndarray, dict[str, str]]:
+    """σ per channel at the model rate: vehicle.json's noise_std where given, else estimated."""
+    est = None
+    out, src = [], {}
+    for c in channels:
+        if c in vehicle.noise_std and vehicle.noise_std[c] > 0:
+            out.append(float(vehicle.noise_std[c]))
+            src[c] = "vehicle file"
+        else:
+            if est is None:
+                est = estimate_noise_std(rec, segments=segments or None)
+            # A floor so a perfectly quantised or noise-free channel cannot dominate the fit.
+            scale = float(np.std(rec.channels[c])) + 1e-9
+            out.append(max(float(est[c]), 1e-4 * scale))
+            src[c] = "estimated from the recording"
+    return np.asarray(out), src
+
+
+def lag1_autocorrelation(residual: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Lag-1 autocorrelation per channel of a (W, T, C) residual over masked (W, T) samples."""
+    r = np.where(mask[..., None], residual, 0.0)
+    both = (mask[:, 1:] & mask[:, :-1])[..., None]
+    num = np.sum(np.where(both, r[:, 1:] * r[:, :-1], 0.0), axis=(0, 1))
+    den = np.sum(r * r, axis=(0, 1)) + 1e-300
+    return np.clip(num / den, -0.99, 0.99)
+
+
+def dof_factor(rho: np.ndarray) -> np.ndarray:
+    """Effective independent samples per sample for AR(1) residuals: (1 − ρ)/(1 + ρ), ≤ 1."""
+    rho = np.clip(np.asarray(rho, dtype=float), 0.0, 0.99)
+    return (1.0 - rho) / (1.0 + rho)

@@ -1,0 +1,415 @@
+"""A recording plus a vehicle becomes one immutable problem: the one road from data to estimators.
+
+Everything downstream (`identify`, `diagnose`, `simulate --inputs`, `observability`, the CLI
+and the Python API) works on a `Problem` built by `make_problem`, so the windows, the noise
+model, the inputs, each window's initial state and the held-out part are decided here only.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..io import InputError, Recording
+from ..simulator import CHANNELS, Decimator, Inputs, Vehicle
+from ._noise import raw_noise_std
+from ._windows import Window, choose_windows
+
+LONGITUDINAL_MODES = ("torque", "speed")
+#: Channels that are inputs, not evidence, when the longitudinal motion follows the measured
+#: speed: vx is the speed itself, ax loads the tyres, and the wheel speeds are vx/R_eff.
+SPEED_MODE_INPUT_CHANNELS = ("ax", "vx", "omega_front", "omega_rear")
+#: Speed averaged over this long at a window start gives its initial speed, s.
+V0_AVERAGE = 0.05
+
+
+@dataclasses.dataclass(frozen=True)
+class ProblemSettings:
+    """How a recording becomes a problem.
+
+    Attributes:
+        longitudinal: "torque" (wheels driven by the recorded torques), "speed" (the
+            longitudinal motion follows the measured speed; for logs without torques or with
+            commanded ones), or "auto" (torque if the recording has torques, else speed).
+        max_window: longest window, s (each window is simulated from its own initial state).
+        held_out: fraction of the usable driving held out for validation.
+        min_windows_to_split: with at least this many windows, whole windows at the end of the
+            drive are held out; fewer, and the end of each window is.
+        max_windows: keep at most this many windows (the longest); None keeps all.
+        burn_in: seconds at each window start left out of the fit (the estimated initial
+            lateral state settles).
+        bandwidth: low-pass cutoff, Hz, applied to measured and simulated channels alike
+            before decimation; None keeps the model rate unfiltered; "auto" is None in torque
+            mode and 5 Hz in speed mode (real drives: vibration above the body dynamics).
+        output_rate: rate after decimation, Hz (when filtering).
+        segment: a user's [t0, t1] s to restrict the drive to, or None.
+        channels: channels to condition on (default: every measured channel the mode allows).
+    """
+
+    longitudinal: str = "auto"
+    max_window: float = 20.0
+    held_out: float = 0.3
+    min_windows_to_split: int = 3
+    max_windows: int | None = None
+    burn_in: float = 1.0
+    bandwidth: float | str | None = "auto"
+    output_rate: float = 25.0
+    segment: tuple[float, float] | None = None
+    channels: tuple[str, ...] | None = None
+
+    def __post_init__(self):
+        if self.longitudinal not in (*LONGITUDINAL_MODES, "auto"):
+            raise ValueError(f"longitudinal must be 'torque', 'speed' or 'auto', got {self.longitudinal!r}")
+        if not 0.0 < self.held_out < 1.0:
+            raise ValueError(f"held_out must lie in (0, 1), got {self.held_out}")
+        if not self.max_window > 0:
+            raise ValueError(f"max_window must be > 0, got {self.max_window}")
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Problem:
+    """What is to be explained: W windows of a drive on a common length, padded and masked.
+
+    Attributes:
+        source: the recording as the user named it.
+        vehicle: known constants.
+        longitudinal: "torque" or "speed".
+        channels: C conditioned channels, in `CHANNELS` order.
+        windows: the W windows (times, role).
+        dt: model sample interval, s.
+        t: (W, T) model-rate time stamps.
+        u: (W, T, 3) steer, torque_front, torque_rear (zeros without torques).
+        speed: (W, T) measured speed (speed mode), else None.
+        accel: (W, T) measured longitudinal specific force, low-passed (speed mode), else None.
+        decimator: the filter and decimation shared by measured and simulated channels, or None.
+        t_out: (W, K) time stamps of the compared samples.
+        y: (W, K, C) measured channels at those samples (filtered and decimated like the model).
+        valid: (W, K) real (not padded) samples.
+        train: (W, K) samples that enter the fit (after the burn-in, not held out).
+        held: (W, K) held-out samples.
+        v0: (W,) measured speed at each window start, m/s.
+        r0: (W,) measured yaw rate at each window start, rad/s (0 without a yaw-rate channel):
+            with θ it gives each window's estimated initial lateral state.
+        sigma: (C,) noise std of the compared samples (after filtering), channel units.
+        sigma_raw: (C,) noise std at the model rate, channel units.
+        noise_source: channel -> where σ came from.
+        description: why these windows ({"usable", "rejected", "how"}).
+        warnings: the recording's warnings.
+    """
+
+    source: str
+    vehicle: Vehicle
+    longitudinal: str
+    channels: tuple[str, ...]
+    windows: tuple[Window, ...]
+    dt: float
+    t: np.ndarray
+    u: np.ndarray
+    speed: np.ndarray | None
+    accel: np.ndarray | None
+    decimator: Decimator | None
+    t_out: np.ndarray
+    y: np.ndarray
+    valid: np.ndarray
+    train: np.ndarray
+    held: np.ndarray
+    v0: np.ndarray
+    r0: np.ndarray
+    sigma: np.ndarray
+    sigma_raw: np.ndarray
+    noise_source: dict
+    description: dict
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def num_windows(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def channel_index(self) -> tuple[int, ...]:
+        return tuple(CHANNELS.index(c) for c in self.channels)
+
+    def part(self, name: str) -> np.ndarray:
+        """The (W, K) mask of "train", "held" or "valid" samples."""
+        if name not in ("train", "held", "valid"):
+            raise ValueError(f"part must be 'train', 'held' or 'valid', got {name!r}")
+        return getattr(self, name)
+
+    def select(self, name: str) -> Problem:
+        """The windows holding any `name` samples, truncated after the last one.
+
+        The simulation need not run past the last compared sample, so a "train" selection of a
+        long drive does not simulate the held-out windows.
+        """
+        mask = self.part(name)
+        keep = np.flatnonzero(mask.any(1))
+        k_end = int(np.max(np.nonzero(mask[keep].any(0))[0])) + 1
+        factor = 1 if self.decimator is None else self.decimator.factor
+        n_end = min(self.t.shape[1], (k_end - 1) * factor + 1 + _tail(self.decimator))
+        cut = lambda a, n: None if a is None else a[keep, :n]
+        return dataclasses.replace(
+            self,
+            windows=tuple(self.windows[i] for i in keep),
+            t=cut(self.t, n_end),
+            u=cut(self.u, n_end),
+            speed=cut(self.speed, n_end),
+            accel=cut(self.accel, n_end),
+            t_out=cut(self.t_out, k_end),
+            y=cut(self.y, k_end),
+            valid=cut(self.valid, k_end),
+            train=cut(self.train, k_end),
+            held=cut(self.held, k_end),
+            v0=self.v0[keep],
+            r0=self.r0[keep],
+        )
+
+    def inputs(self) -> Inputs:
+        """The W windows' inputs as one `Inputs` whose leaves are stacked over windows."""
+        per = [
+            Inputs(
+                self.t[w, 0],
+                self.dt,
+                *self.u[w].T,
+                speed=None if self.speed is None else self.speed[w],
+                accel=None if self.accel is None else self.accel[w],
+            )
+            for w in range(self.num_windows)
+        ]
+        return jax.tree.map(lambda *a: jnp.stack(a), *per)
+
+    def compare(self, readings):
+        """Model readings (…, W, T, 6) at the model rate -> (…, W, K, C) compared samples."""
+        ys = readings[..., list(self.channel_index)]
+        if self.decimator is None:
+            return ys
+        lead = ys.shape[:-2]
+        flat = ys.reshape((-1, *ys.shape[-2:]))
+        out = jax.vmap(self.decimator)(flat)
+        return out.reshape((*lead, *out.shape[-2:]))
+
+    def summary(self) -> dict:
+        """What a report says about the problem (JSON-ready)."""
+        return {
+            "recording": self.source,
+            "longitudinal": self.longitudinal,
+            "channels": list(self.channels),
+            "windows": [
+                {"t0": round(w.t0, 3), "t1": round(w.t1, 3), "role": w.role}
+                | ({"held_from": round(w.split, 3)} if w.split is not None else {})
+                for w in self.windows
+            ],
+            "train_seconds": round(float(self.train.sum()) * self._out_dt, 2),
+            "held_out_seconds": round(float(self.held.sum()) * self._out_dt, 2),
+            "filter": None
+            if self.decimator is None
+            else {"cutoff_hz": self.decimator.cutoff, "output_rate_hz": 1.0 / self._out_dt},
+            "noise_std": {c: float(s) for c, s in zip(self.channels, self.sigma)},
+            "noise_source": dict(self.noise_source),
+            **self.description,
+        }
+
+    @property
+    def _out_dt(self) -> float:
+        return self.dt * (1 if self.decimator is None else self.decimator.factor)
+
+
+def _tail(decimator) -> int:
+    return 0 if decimator is None else decimator.factor - 1
+
+
+def _mode(rec: Recording, settings: ProblemSettings) -> str:
+    mode = settings.longitudinal
+    if mode == "auto":
+        mode = "torque" if rec.has_torques else "speed"
+    if mode == "torque" and not rec.has_torques:
+        raise InputError(
+            rec.source,
+            "torque_front",
+            "no torque columns: the torque-driven model needs them; use the speed-driven mode "
+            "(--longitudinal speed)",
+        )
+    return mode
+
+
+def _channels(rec: Recording, mode: str, settings: ProblemSettings) -> tuple[str, ...]:
+    allowed = [c for c in CHANNELS if c in rec.channels]
+    if mode == "speed":
+        allowed = [c for c in allowed if c not in SPEED_MODE_INPUT_CHANNELS]
+    if settings.channels is not None:
+        bad = [c for c in settings.channels if c not in allowed]
+        if bad:
+            raise InputError(
+                rec.source, "channels", f"{bad} not available in {mode} mode (available: {allowed})"
+            )
+        allowed = [c for c in CHANNELS if c in settings.channels]
+    need = 1 if mode == "speed" else 2
+    if len(allowed) < need:
+        what = "ay or yaw_rate" if mode == "speed" else "at least 2 measured channels"
+        raise InputError(
+            rec.source, "channels", f"{mode}-driven identification needs {what}; found {allowed}"
+        )
+    return tuple(allowed)
+
+
+def _decimator(rec: Recording, mode: str, settings: ProblemSettings) -> Decimator | None:
+    cutoff = settings.bandwidth
+    if cutoff == "auto":
+        cutoff = None if mode == "torque" else 5.0
+    if cutoff is None:
+        return None
+    factor = max(1, int(round(rec.rate / settings.output_rate)))
+    if not 0 < float(cutoff) < 0.5 * rec.rate / factor:
+        raise ValueError(
+            f"bandwidth {cutoff} Hz must lie below the output Nyquist rate {0.5 * rec.rate / factor:g} Hz"
+        )
+    return Decimator(rate=rec.rate, cutoff=float(cutoff), factor=factor)
+
+
+def _running_mean(x: np.ndarray, n: int) -> np.ndarray:
+    if n <= 1:
+        return x
+    pad = np.pad(x, (n // 2, n - 1 - n // 2), mode="edge")
+    return np.convolve(pad, np.ones(n) / n, mode="valid")
+
+
+def _window_arrays(rec: Recording, windows: Sequence[Window], mode: str, vehicle: Vehicle):
+    """Model-rate arrays (W, T, …) of the windows, padded to a common length by holding the end."""
+    idx = [
+        (int(np.searchsorted(rec.t, w.t0 - 1e-9)), int(np.searchsorted(rec.t, w.t1 + 1e-9))) for w in windows
+    ]
+    n_max = max(i1 - i0 for i0, i1 in idx)
+    torques = (rec.torque_front, rec.torque_rear) if rec.has_torques else (np.zeros_like(rec.t),) * 2
+    u_all = np.stack([rec.steer, *torques], -1)
+    speed_all = rec.speed(vehicle.wheel_radius)
+    if speed_all is None:
+        raise InputError(rec.source, "vx", "no speed: neither vx nor wheel speeds, so no initial speed")
+    n_avg = max(1, int(round(0.25 * rec.rate)))
+    if "ax" in rec.channels:
+        accel_all = _running_mean(rec.channels["ax"], n_avg)
+    else:
+        accel_all = np.gradient(_running_mean(speed_all, n_avg), rec.dt)
+    yaw_all = _running_mean(rec.channels["yaw_rate"], n_avg) if "yaw_rate" in rec.channels else None
+
+    def padded(a, i0, i1):
+        seg = a[i0:i1]
+        return np.concatenate([seg, np.repeat(seg[-1:], n_max - len(seg), axis=0)])
+
+    t = np.stack([rec.t[i0] + rec.dt * np.arange(n_max) for i0, _ in idx])
+    u = np.stack([padded(u_all, i0, i1) for i0, i1 in idx])
+    speed = np.stack([padded(speed_all, i0, i1) for i0, i1 in idx])
+    accel = np.stack([padded(accel_all, i0, i1) for i0, i1 in idx])
+    n_v0 = max(1, int(round(V0_AVERAGE * rec.rate)))
+    v0 = np.array([np.median(speed_all[i0 : i0 + n_v0]) for i0, _ in idx])
+    r0 = np.array([yaw_all[i0] if yaw_all is not None else 0.0 for i0, _ in idx])
+    lengths = np.array([i1 - i0 for i0, i1 in idx])
+    if mode == "torque":
+        speed = accel = None
+    return idx, t, u, speed, accel, np.maximum(v0, 0.5), r0, lengths
+
+
+def _compared(rec, channels, idx, n_max, decimator):
+    """(W, K, C) measured channels, filtered and decimated exactly as the model's will be."""
+    y_all = rec.measured(channels)
+    ys = []
+    for i0, i1 in idx:
+        seg = y_all[i0:i1]
+        ys.append(np.concatenate([seg, np.repeat(seg[-1:], n_max - len(seg), axis=0)]))
+    y = np.stack(ys)
+    if decimator is None:
+        return y
+    return np.asarray(jax.vmap(decimator)(jnp.asarray(y)))
+
+
+def _masks(windows, t_out, lengths, dt, burn_in):
+    W, K = t_out.shape
+    t_end = np.array([w.t0 + (n - 1) * dt for w, n in zip(windows, lengths)])
+    valid = t_out <= t_end[:, None] + 1e-9
+    after_burn = t_out >= np.array([w.t0 + burn_in for w in windows])[:, None] - 1e-9
+    train = np.zeros((W, K), bool)
+    held = np.zeros((W, K), bool)
+    for i, w in enumerate(windows):
+        if w.role == "held":
+            held[i] = valid[i] & after_burn[i]
+        elif w.split is None:
+            train[i] = valid[i] & after_burn[i]
+        else:
+            # A short drive: the burn-in never takes more than half the fitted part.
+            start = w.t0 + min(burn_in, 0.5 * (w.split - w.t0))
+            train[i] = valid[i] & (t_out[i] >= start - 1e-9) & (t_out[i] < w.split - 1e-9)
+            held[i] = valid[i] & (t_out[i] >= w.split - 1e-9)
+    return valid, train, held
+
+
+def make_problem(rec: Recording, vehicle: Vehicle, settings: ProblemSettings = ProblemSettings()) -> Problem:
+    """The one function that turns a recording and a vehicle into a `Problem`.
+
+    Stages: the longitudinal mode; the conditioned channels; the stretch (a user's segment or
+    all of it); the windows and the held-out part; the model-rate inputs and initial states;
+    the filter and decimation; the compared samples and masks; the noise model.
+
+    Raises:
+        InputError: naming the recording and what is missing (torques, speed, channels, a
+            segment outside the recording).
+    """
+    mode = _mode(rec, settings)
+    channels = _channels(rec, mode, settings)
+    if settings.segment is not None:
+        rec = _restrict(rec, settings.segment)
+    windows, described = choose_windows(
+        rec,
+        wheel_radius=vehicle.wheel_radius,
+        max_window=settings.max_window,
+        min_duration=min(5.0, settings.max_window),
+        held_out=settings.held_out,
+        min_windows_to_split=settings.min_windows_to_split,
+        max_windows=settings.max_windows,
+    )
+    idx, t, u, speed, accel, v0, r0, lengths = _window_arrays(rec, windows, mode, vehicle)
+    decimator = _decimator(rec, mode, settings)
+    factor = 1 if decimator is None else decimator.factor
+    t_out = t[:, ::factor]
+    y = _compared(rec, channels, idx, t.shape[1], decimator)
+    valid, train, held = _masks(windows, t_out, lengths, rec.dt, settings.burn_in)
+    segments = [(w.t0, w.t1) for w in windows]
+    sigma_raw, source = raw_noise_std(rec, vehicle, channels, segments)
+    gain = 1.0 if decimator is None else float(np.sqrt(np.sum(np.asarray(decimator.taps) ** 2)))
+    return Problem(
+        source=rec.source,
+        vehicle=vehicle,
+        longitudinal=mode,
+        channels=channels,
+        windows=tuple(windows),
+        dt=rec.dt,
+        t=t,
+        u=u,
+        speed=speed,
+        accel=accel,
+        decimator=decimator,
+        t_out=t_out,
+        y=y,
+        valid=valid,
+        train=train,
+        held=held,
+        v0=v0,
+        r0=r0,
+        sigma=sigma_raw * gain,
+        sigma_raw=sigma_raw,
+        noise_source=source,
+        description=described,
+        warnings=tuple(rec.warnings),
+    )
+
+
+def _restrict(rec: Recording, segment: tuple[float, float]) -> Recording:
+    t0, t1 = segment
+    if not (rec.t[0] - 1e-9 <= t0 < t1 <= rec.t[-1] + 1e-9):
+        raise InputError(
+            rec.source,
+            "--segment",
+            f"[{t0}, {t1}] s is not inside the recording [{rec.t[0]:.3f}, {rec.t[-1]:.3f}] s",
+        )
+    return rec.slice(t0, t1)

@@ -1,0 +1,97 @@
+"""Which stretches of a drive are explained, and which part of them is held out."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..io import Recording, find_segments
+
+
+@dataclasses.dataclass(frozen=True)
+class Window:
+    """One stretch [t0, t1] s simulated from its own initial state.
+
+    Attributes:
+        t0, t1: start and end, s.
+        role: "train" (fitted; its last part is held out when `split` is set), or "held"
+            (held out whole).
+        split: for a "train" window that is also the held-out window (a short drive), the time
+            from which its samples are held out, s; None otherwise.
+    """
+
+    t0: float
+    t1: float
+    role: str
+    split: float | None = None
+
+    @property
+    def duration(self) -> float:
+        return self.t1 - self.t0
+
+
+def _pieces(stretches: list[tuple[float, float]], max_window: float) -> list[tuple[float, float]]:
+    """Cut each stretch into equal pieces no longer than `max_window`."""
+    out = []
+    for a, b in stretches:
+        k = max(1, int(np.ceil((b - a) / max_window - 1e-9)))
+        edges = np.linspace(a, b, k + 1)
+        out += [(float(edges[j]), float(edges[j + 1])) for j in range(k)]
+    return out
+
+
+def choose_windows(
+    rec: Recording,
+    *,
+    wheel_radius: float,
+    max_window: float,
+    min_duration: float,
+    held_out: float,
+    min_windows_to_split: int,
+    max_windows: int | None,
+) -> tuple[list[Window], dict]:
+    """Windows over every usable stretch of `rec`, and why.
+
+    The usable driving (`vdsbi.io.find_segments`: moving and excited) is cut into windows of at
+    most `max_window` s. With at least `min_windows_to_split` windows, those whose start lies in
+    the last `held_out` fraction of the usable driving time are held out whole (validation on
+    driving the fit never saw); a shorter drive keeps its windows and holds out the last
+    `held_out` fraction of each. With `max_windows`, the longest windows are kept (ties by time).
+    With no usable stretch the whole recording is one window.
+
+    Returns:
+        windows in time order, and a description {"usable", "rejected", "how"}.
+    """
+    segs = find_segments(rec, wheel_radius=wheel_radius, min_duration=min(min_duration, 0.9 * rec.duration))
+    usable = [(s.t0, s.t1) for s in segs if s.usable]
+    described = {
+        "usable": [[round(a, 3), round(b, 3)] for a, b in usable],
+        "rejected": [[round(s.t0, 3), round(s.t1, 3), s.reason] for s in segs if not s.usable],
+    }
+    if not usable:
+        usable = [(float(rec.t[0]), float(rec.t[-1]))]
+        described["how"] = "no usable stretch found: the whole recording"
+    pieces = _pieces(usable, max_window)
+    if max_windows is not None and len(pieces) > max_windows:
+        pieces = sorted(sorted(pieces, key=lambda p: (-(p[1] - p[0]), p[0]))[:max_windows])
+    if len(pieces) >= min_windows_to_split:
+        total = sum(b - a for a, b in pieces)
+        elapsed = np.cumsum([0.0] + [b - a for a, b in pieces])[:-1]
+        windows = [
+            Window(a, b, "held" if e >= (1 - held_out) * total - 1e-9 else "train")
+            for (a, b), e in zip(pieces, elapsed)
+        ]
+        if all(w.role == "held" for w in windows) or all(w.role == "train" for w in windows):
+            windows = [dataclasses.replace(w, role="train") for w in windows[:-1]] + [
+                dataclasses.replace(windows[-1], role="held")
+            ]
+        how = (
+            f"{len(windows)} windows of <= {max_window:g} s over {len(usable)} usable stretch(es); "
+            f"the last {held_out:.0%} of the usable driving held out"
+        )
+    else:
+        windows = [Window(a, b, "train", split=a + (1 - held_out) * (b - a)) for a, b in pieces]
+        how = f"{len(windows)} window(s) of <= {max_window:g} s; the last {held_out:.0%} of each held out"
+    described.setdefault("how", how)
+    return windows, described
