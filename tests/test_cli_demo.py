@@ -5,13 +5,13 @@ import json
 import numpy as np
 import pytest
 
-from vdsbi.cli._demo import make_recording
+from vdsbi.api import demo_recording
 from vdsbi.io import read_recording, read_vehicle
 
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_demo_recording_is_valid_and_keeps_rolling(tmp_path, seed):
-    truth = make_recording(tmp_path, duration=20.0, seed=seed)
+    truth = demo_recording(tmp_path, duration=20.0, seed=seed)
     rec = read_recording(tmp_path / "recording.csv")
     read_vehicle(tmp_path / "vehicle.json")
     assert rec.duration == pytest.approx(20.0, abs=0.01)

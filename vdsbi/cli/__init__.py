@@ -17,5 +17,5 @@ COMMANDS: tuple[str, ...] = (
     "._diagnose",
 )
 
+from ..api import output_dir as output_dir  # noqa: E402
 from ._main import build_parser as build_parser, main as main  # noqa: E402
-from ._output import output_dir as output_dir  # noqa: E402

@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 
-import numpy as np
-
-from ..simulator._vehicle import CHANNELS
+from .. import api
+from ..simulator import CHANNELS
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -25,33 +23,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
-def summarise(rec, vehicle) -> dict:
-    from ..io import estimate_noise_std, find_segments
-
-    segs = find_segments(rec, wheel_radius=vehicle.wheel_radius)
-    usable = [(s.t0, s.t1) for s in segs if s.usable]
-    speed = rec.speed(vehicle.wheel_radius)
-    return {
-        "source": rec.source,
-        "duration_s": rec.duration,
-        "original_rate_hz": rec.original_rate,
-        "rate_hz": rec.rate,
-        "samples": rec.num_samples,
-        "channels": list(rec.channel_names),
-        "speed_range_mps": None if speed is None else [float(np.min(speed)), float(np.max(speed))],
-        "usable_segments": [[round(a, 3), round(b, 3)] for a, b in usable],
-        "rejected_segments": [[round(s.t0, 3), round(s.t1, 3), s.reason] for s in segs if not s.usable],
-        "noise_std_estimate": estimate_noise_std(rec, segments=usable or None),
-        "warnings": list(rec.warnings),
-    }
-
-
 def run(args) -> int:
-    from ..io import load_drive
-    from ._output import output_dir
-
-    rec, vehicle = load_drive(args.recording, args.vehicle, rate=args.rate, topic_map=args.topic_map)
-    s = summarise(rec, vehicle)
+    res = api.check(args.recording, args.vehicle, rate=args.rate, topic_map=args.topic_map)
+    s = res.summary
     missing = [c for c in CHANNELS if c not in s["channels"]]
     print(f"{s['source']}: OK")
     print(f"  duration   {s['duration_s']:.2f} s, {s['samples']} samples")
@@ -66,12 +40,11 @@ def run(args) -> int:
     for a, b in s["usable_segments"]:
         print(f"             {a:8.2f} .. {b:8.2f} s")
     noise = ", ".join(f"{k} {v:.3g}" for k, v in s["noise_std_estimate"].items())
-    print(f"  noise std  {noise} (estimated; vehicle noise_std: {dict(vehicle.noise_std) or 'none'})")
+    print(f"  noise std  {noise} (estimated; vehicle noise_std: {dict(res.vehicle.noise_std) or 'none'})")
     for w in s["warnings"]:
         print(f"  warning: {w}")
     if args.out:
-        with output_dir(args.out, overwrite=True) as d:
-            rec.to_csv(d / "recording.csv")
-            (d / "summary.json").write_text(json.dumps(s, indent=2) + "\n")
+        with api.output_dir(args.out, overwrite=True) as d:
+            res.save(d)
         print(f"wrote {args.out}/recording.csv, summary.json")
     return 0

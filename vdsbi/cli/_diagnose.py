@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import argparse
 
+from .. import api
+from ..io import load_drive
+from . import _args
+
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
@@ -36,26 +40,17 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args) -> int:
-    from ..discovery import EFFECT_NAMES, diagnose
-    from ..io import InputError, load_drive
-    from ._output import output_dir
-
-    if args.effects is not None:
-        bad = [e for e in args.effects.split(",") if e.strip() not in EFFECT_NAMES]
-        if bad:
-            raise InputError(
-                "--effects", bad[0], f"unknown effect; expected some of {', '.join(EFFECT_NAMES)}"
-            )
+    candidates = None if args.effects is None else _args.effect_names(args.effects.split(","))
     rec, vehicle = load_drive(args.recording, args.vehicle)
-    with output_dir(args.out, overwrite=args.overwrite) as d:
-        res = diagnose(
+    with api.output_dir(args.out, overwrite=args.overwrite) as d:
+        res = api.diagnose(
             rec,
             vehicle,
             d,
             seed=args.seed,
             alpha=args.alpha,
             top_pairs=args.top_pairs,
-            candidates=None if args.effects is None else [e.strip() for e in args.effects.split(",")],
+            candidates=candidates,
             max_windows=args.max_windows,
             final_dt=args.final_dt,
             quiet=args.quiet,

@@ -5,15 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..io._errors import InputError
-
-
-def _segment(text: str) -> tuple[float, float]:
-    try:
-        a, b = (float(v) for v in text.split(":"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected T0:T1 in seconds, got {text!r}") from None
-    return a, b
+from .. import api
+from . import _args
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -35,19 +28,14 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--resume", action="store_true", help="continue from DIR's checkpoint")
     p.add_argument("--quiet", action="store_true", help="no progress bars or messages")
-    p.add_argument("--segment", type=_segment, metavar="T0:T1", help="use this stretch, s")
+    p.add_argument("--segment", type=_args.segment, metavar="T0:T1", help="use this stretch, s")
     p.add_argument("--max-duration", type=float, default=20.0, help="longest stretch used, s (default 20)")
     p.add_argument("--rate", type=float, default=200.0, help="model rate, Hz (default 200)")
     return p
 
 
 def run(args) -> int:
-    from .. import api
-
-    if args.max_duration <= 0:
-        raise InputError("settings", "--max-duration", "must be > 0")
     quiet = args.quiet
-    log = None if quiet else (lambda s: print(s, flush=True))
     res = api.identify(
         args.recording,
         args.vehicle,
@@ -63,7 +51,7 @@ def run(args) -> int:
         max_duration=args.max_duration,
         rate=args.rate,
         progress=not quiet and sys.stderr.isatty(),
-        log=log,
+        log=None if quiet else (lambda s: print(s, flush=True)),
     )
     if not quiet:
         print(res.table())

@@ -8,7 +8,7 @@ import sys
 from collections.abc import Sequence
 
 from .. import __version__
-from ..io._errors import InputError
+from ..io import InputError
 
 #: Exit status for bad user input (same as argparse's usage errors).
 EXIT_INPUT = 2

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
-import math
-from pathlib import Path
+
+from .. import api
+from ..io import InputError, read_recording
+from ..simulator import SEED_TRUE_THETA, seed_profile
+from . import _args
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -55,117 +57,29 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
-def _json_arg(text: str, field: str):
-    from ..io import InputError
-
-    path = Path(text)
-    try:
-        if path.suffix.lower() == ".json" and path.exists():
-            return json.loads(path.read_text())
-        return json.loads(text)
-    except (OSError, json.JSONDecodeError) as err:
-        raise InputError(text, field, f"not valid JSON ({err})") from None
-
-
-def _theta(args):
-    from ..io import InputError
-    from ..simulator import PARAM_NAMES, SEED_TRUE_THETA
-
-    values = dict(SEED_TRUE_THETA)
-    if args.theta:
-        given = _json_arg(args.theta, "--theta")
-        if not isinstance(given, dict):
-            raise InputError(args.theta, "--theta", "expected a JSON object {name: value}")
-        for k, v in given.items():
-            if k not in PARAM_NAMES:
-                raise InputError(
-                    args.theta, "--theta", f"unknown parameter '{k}' (expected {list(PARAM_NAMES)})"
-                )
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise InputError(args.theta, "--theta", f"'{k}' must be a finite number, got {v!r}")
-            values[k] = float(v)
-    return [values[n] for n in PARAM_NAMES]
-
-
 def run(args) -> int:
-    import jax
-
-    from ..io import InputError, read_recording, read_vehicle
-    from ..simulator import CHANNELS, SEED_CHANNELS, check_theta, effect_params_from, make_model, seed_profile
-    from ._output import output_dir
-
-    vehicle = read_vehicle(args.vehicle)
+    theta = _args.theta(args.theta, SEED_TRUE_THETA)
+    effects = _args.effect_names(args.effects)
+    params = _args.effects(args.effect_params, "--effect-params")[1] if args.effect_params else None
     if args.inputs:
-        rec = read_recording(args.inputs)
-        inputs = rec.inputs()
-        channels = list(args.channels or [c for c in rec.channel_names])
-        v0 = args.v0
-        if v0 is None:
-            speed = rec.speed(vehicle.wheel_radius)
-            if speed is None:
-                raise InputError(args.inputs, "--v0", "recording has no vx or wheel speeds; give --v0")
-            v0 = float(speed[0])
-        maneuver = str(args.inputs)
+        maneuver, label = read_recording(args.inputs), str(args.inputs)
     else:
         if not args.duration > 0:
             raise InputError("--duration", "value", f"must be > 0, got {args.duration}")
-        inputs = seed_profile(duration=args.duration)
-        channels = list(args.channels or SEED_CHANNELS)
-        v0 = 10.5 if args.v0 is None else args.v0
-        maneuver = f"seed profile, {args.duration:g} s"
-    bad = [c for c in channels if c not in CHANNELS]
-    if bad:
-        raise InputError(
-            "--channels", "value", f"unknown channel(s) {bad} (expected some of {list(CHANNELS)})"
-        )
-    if not (math.isfinite(v0) and v0 > 0):
-        raise InputError("--v0", "value", f"initial speed must be > 0 m/s, got {v0}")
-    dropped = []
-    if args.noise == "vehicle":
-        dropped = [c for c in channels if not vehicle.noise_std.get(c, 0.0) > 0]
-        channels = [c for c in channels if c not in dropped]
-        if not channels:
-            raise InputError(
-                args.vehicle,
-                "noise_std",
-                f"--noise vehicle needs a positive noise_std for at least one measured channel of {dropped}",
-            )
-    theta = _theta(args)
-    try:
-        check_theta(theta, vehicle)
-        model = make_model(vehicle, args.effects)
-        ep_values = _json_arg(args.effect_params, "--effect-params") if args.effect_params else None
-        _, eparams = effect_params_from(args.effects, ep_values)
-    except ValueError as err:
-        if isinstance(err, InputError):
-            raise
-        raise InputError("arguments", "value", str(err)) from None
-
-    from ..diagnostics import fisher_report, model_fisher, report_markdown
-
-    with jax.enable_x64(True):
-        import jax.numpy as jnp
-
-        fisher = model_fisher(
-            model,
-            jnp.asarray(theta, dtype=float),
-            inputs,
-            v0,
-            tuple(jnp.asarray(p, dtype=float) for p in eparams),
-            channels=channels,
-            noise=args.noise,
-            noise_std=vehicle.noise_std,
-        )
-        rep = fisher_report(fisher)
-    rep["maneuver"] = maneuver
-    rep["v0"] = v0
-    rep["noise"] = args.noise
-    rep["channels_without_noise_std"] = dropped
-    rep["effects"] = list(args.effects)
-    md = report_markdown(rep, title=f"Observability: {maneuver}, v0 = {v0:.3g} m/s, {args.noise} noise")
-    with output_dir(args.out, overwrite=args.overwrite) as d:
-        (d / "fisher.json").write_text(json.dumps(rep, indent=2, allow_nan=True) + "\n")
-        (d / "fisher.md").write_text(md)
-    print(md)
+        maneuver, label = seed_profile(duration=args.duration), f"seed profile, {args.duration:g} s"
+    res = api.observability(
+        args.vehicle,
+        maneuver,
+        theta=theta,
+        v0=args.v0,
+        channels=args.channels,
+        noise=args.noise,
+        effects=effects,
+        effect_params=params,
+        label=label,
+    )
+    with api.output_dir(args.out, overwrite=args.overwrite) as d:
+        res.save(d)
+    print(res.markdown())
     print(f"wrote {args.out}/fisher.json, fisher.md")
     return 0

@@ -8,6 +8,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from ..io import InputError
+from ..io._errors import SimulationError
 from ..simulator import PARAM_NAMES, StochasticSimulator
 from ._apt import APTState, NPEConfig, apt
 from ._cnn import CNNEmbedding
@@ -53,9 +55,15 @@ class IdentifySettings:
 
     def __post_init__(self):
         if self.embedding not in ("cnn", "stats"):
-            raise ValueError(f"embedding must be 'cnn' or 'stats', got {self.embedding!r}")
-        if self.rounds < 1 or self.sims_per_round < 10:
-            raise ValueError("need rounds >= 1 and sims_per_round >= 10")
+            raise InputError("settings", "embedding", f"must be 'cnn' or 'stats', got {self.embedding!r}")
+        if self.rounds < 1:
+            raise InputError("settings", "rounds", f"must be >= 1, got {self.rounds}")
+        if self.sims_per_round < 10:
+            raise InputError("settings", "sims_per_round", f"must be >= 10, got {self.sims_per_round}")
+
+
+#: Fewest usable simulations training can start from: two to train on, one to validate.
+MIN_USABLE_SIMULATIONS = 3
 
 
 def observation(
@@ -117,6 +125,9 @@ def identify(
 
     Returns:
         (posterior at the observation, (num_samples, 6) samples, final APT state).
+
+    Raises:
+        SimulationError: fewer than `MIN_USABLE_SIMULATIONS` usable simulations after a round.
     """
     readings_o = jnp.asarray(readings_o, dtype=jnp.float32)
     if readings_o.shape[-1] != len(simulator.channels):
@@ -129,11 +140,18 @@ def identify(
     obs = jax.jit(jax.vmap(lambda r: observation(r, u, settings.embedding)))
     x_o = obs(readings_o[None])[0]
 
+    usable = [0 if state is None else int(state.x.shape[0])]
+
     def simulate(k, theta):
         if on_simulate is not None:
             on_simulate(theta.shape[0])
         ys, ok = simulator(k, jnp.asarray(theta, jnp.float32))
-        return obs(ys), ok
+        x = obs(ys)
+        finite = np.all(np.isfinite(np.asarray(x).reshape(x.shape[0], -1)), axis=1)
+        usable[0] += int(np.sum(np.asarray(ok) & finite))
+        if usable[0] < MIN_USABLE_SIMULATIONS:
+            raise SimulationError(usable[0], theta.shape[0])
+        return x, ok
 
     k_emb, k_apt, k_s = jax.random.split(key, 3)
     embedding = make_embedding(k_emb, x_o.shape, settings)

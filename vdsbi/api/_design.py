@@ -1,0 +1,238 @@
+"""`design`: a maneuver optimised to make a parameter (or all of them) observable within
+driving limits, with the Cramér–Rao bounds before and after."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..io import InputError, Recording
+from ..simulator import CHANNELS, PARAM_NAMES, SEED_CHANNELS, Vehicle
+from ._validate import PROFILE_V0, checked_theta, load_vehicle, noise_channels
+
+
+@dataclasses.dataclass
+class DesignReport:
+    """What `design` found.
+
+    Attributes:
+        bounds: CRB of the seed's maneuver ("before"), the optimiser's start and the designed
+            maneuver ("after"), the improvement per parameter and the limits check.
+        info: the designed maneuver's parameters, the limits, and the optimiser's history.
+        recording: the designed maneuver's inputs and noise-free simulated channels.
+    """
+
+    bounds: dict[str, Any]
+    info: dict[str, Any]
+    recording: Recording
+
+    def markdown(self) -> str:
+        """bounds.md: the bounds before/after per parameter and the limits reached."""
+        b = self.bounds
+        lines = [
+            f"# Designed maneuver: target {b['target']}",
+            "",
+            f"Noise: {b['noise']}. Before: {b['before']['maneuver']}. After: designed maneuver "
+            f"(v0 = {b['after']['v0']:.3g} m/s). Limits respected: {b['limits_check']['respected']}.",
+            "",
+            "| parameter | CRB std before | CRB std after | improvement (before/after) |",
+            "|---|---|---|---|",
+        ]
+        for n in b["before"]["crb_std"]:
+            lo, hi = b["before"]["crb_std"][n], b["after"]["crb_std"][n]
+            lines.append(f"| {n} | {lo:.4g} | {hi:.4g} | {lo / hi:.2f}× |")
+        lines += [
+            "",
+            "log det F (scaled): before {:.3f}, after {:.3f}.".format(
+                b["before"]["logdet_scaled"], b["after"]["logdet_scaled"]
+            ),
+        ]
+        c = b["limits_check"]
+        lo, hi = c["vx_range"]
+        lines += [
+            "",
+            f"Limits: max |ay| {c['max_abs_ay']:.3f} ≤ {c['ay_limit']:.3f} m/s²; "
+            f"vx {lo:.2f}..{hi:.2f} in [{c['speed_window'][0]:g}, {c['speed_window'][1]:g}] m/s; "
+            f"|steer| {c['max_abs_steer']:.4f} ≤ {c['steer_limit']:g} rad; "
+            f"drive {c['max_drive_torque']:.0f} ≤ {c['drive_limit']:g} N·m; "
+            f"brake {c['max_brake_torque']:.0f} ≤ {c['brake_limit']:g} N·m.",
+        ]
+        return "\n".join(lines) + "\n"
+
+    def save(self, out: str | os.PathLike) -> None:
+        """maneuver.csv, bounds.json, bounds.md and design.json into the directory `out`."""
+        out = Path(out)
+        self.recording.to_csv(out / "maneuver.csv")
+        (out / "bounds.json").write_text(json.dumps(self.bounds, indent=2) + "\n")
+        (out / "bounds.md").write_text(self.markdown())
+        (out / "design.json").write_text(json.dumps(self.info, indent=2) + "\n")
+
+
+def design(
+    vehicle: str | os.PathLike | Vehicle,
+    *,
+    target: str = "C_kappa_r",
+    theta: Mapping[str, float] | Sequence[float] | None = None,
+    noise: str = "seed",
+    steps: int = 150,
+    learning_rate: float = 0.05,
+    duration: float = 5.0,
+    max_steer: float = 0.1,
+    max_drive: float = 900.0,
+    max_brake: float = 1800.0,
+    brake_front_share: float = 0.65,
+    speed_window: tuple[float, float] = (5.0, 20.0),
+    log: Callable[[str], None] | None = None,
+) -> DesignReport:
+    """Gradient ascent through the simulator on a maneuver's parameters (steer sines, pedal
+    levels and timing, initial speed) that minimises the Cramér–Rao bound of `target` (or
+    maximises log det F with target "D"), within |ay| ≤ 0.6·μ·g, the steer/torque limits and
+    the speed window.
+
+    Args:
+        vehicle: vehicle constants (file or object).
+        target: a PARAM_NAMES entry, or "D" for D-optimal.
+        theta: parameters (array or {name: value} over the seed's Table II truth).
+        noise: "seed" (relative) or "vehicle" (the vehicle's additive noise_std).
+        steps, learning_rate: Adam steps and step size.
+        duration, max_steer, max_drive, max_brake, brake_front_share, speed_window: limits.
+        log: where progress lines go, every 10 steps (default: nowhere).
+
+    Raises:
+        InputError: a target, θ, limit or noise model that does not fit.
+    """
+    import jax
+
+    veh, source = load_vehicle(vehicle)
+    if target not in (*PARAM_NAMES, "D"):
+        raise InputError("--target", "value", f"expected one of {[*PARAM_NAMES, 'D']}, got {target!r}")
+    if steps < 0:
+        raise InputError("--steps", "value", "must be >= 0")
+    th = checked_theta(theta, veh)
+    limits = _limits(duration, max_steer, max_drive, max_brake, brake_front_share, speed_window)
+    channels, _ = noise_channels(list(SEED_CHANNELS), noise, veh, source)
+    with jax.enable_x64(True):
+        import jax.numpy as jnp
+
+        from ..diagnostics import Maneuver, check_limits, design_problem
+        from ..simulator import make_model
+
+        model, th = make_model(veh), jnp.asarray(th, dtype=float)
+        problem = design_problem(
+            model,
+            th,
+            limits,
+            target=None if target == "D" else target,
+            channels=channels,
+            noise=noise,
+            noise_std_map=veh.noise_std,
+        )
+        start = Maneuver.seed_like(limits)
+        res = _optimise(problem, start, steps, learning_rate, log or (lambda s: None))
+        designed, v0 = res.maneuver.inputs(limits), float(res.maneuver.initial_speed(limits))
+        fisher = dict(channels=channels, noise=noise, noise_std=veh.noise_std)
+        bounds = {"target": target, "noise": noise, "channels": channels}
+        bounds |= _reports(model, th, limits, start, res.maneuver, fisher)
+        before, after = bounds["before"]["crb_std"], bounds["after"]["crb_std"]
+        bounds["improvement"] = {n: before[n] / after[n] for n in before}
+        bounds["limits_check"] = check_limits(model, th, designed, v0, limits)
+        rec = _recording(model, th, designed, v0)
+        described = res.maneuver.describe(limits)
+    info = {
+        "target": target,
+        "maneuver": described,
+        "limits": {k: getattr(limits, k) for k in limits.__dataclass_fields__},
+        "steps": steps,
+        "best_step": res.best_step,
+        "history": {k: v.tolist() for k, v in res.history.items()},
+    }
+    return DesignReport(bounds, info, rec)
+
+
+def _limits(duration, max_steer, max_drive, max_brake, brake_front_share, speed_window):
+    from ..diagnostics import Limits
+
+    lo, hi = speed_window
+    try:
+        return Limits(
+            duration=duration,
+            max_steer=max_steer,
+            max_drive=max_drive,
+            max_brake=max_brake,
+            brake_front_share=brake_front_share,
+            v_min=lo,
+            v_max=hi,
+            v0_min=lo,
+            v0_max=hi,
+        )
+    except ValueError as err:
+        raise InputError("arguments", "value", str(err)) from None
+
+
+def _optimise(problem, start, steps: int, learning_rate: float, say: Callable[[str], None]):
+    """`vdsbi.diagnostics.design` with a progress line every 10 steps."""
+    from ..diagnostics import design as run_design
+
+    t0 = time.perf_counter()
+
+    def progress(i, obj):
+        if i % 10 == 0 or i == steps:
+            say(
+                f"  step {i:4d}  objective {float(obj.value):9.4f}  penalty {float(obj.penalty):.2e}  "
+                f"[{time.perf_counter() - t0:.0f} s]"
+            )
+
+    try:
+        return run_design(problem, start, num_steps=steps, learning_rate=learning_rate, callback=progress)
+    except ValueError as err:
+        raise InputError("limits", "value", str(err)) from None
+
+
+def _reports(model, theta, limits, start, designed, fisher: dict) -> dict[str, dict]:
+    """Fisher reports ("before": the seed's profile, "start", "after": designed), with log det F."""
+    from ..diagnostics import fisher_report, model_fisher
+    from ..simulator import seed_profile
+
+    maneuvers = {
+        "before": (
+            seed_profile(duration=limits.duration),
+            PROFILE_V0,
+            f"seed profile, {limits.duration:g} s, v0 = {PROFILE_V0} m/s",
+        ),
+        "start": (start.inputs(limits), float(start.initial_speed(limits)), "optimiser start (seed-like)"),
+        "after": (designed.inputs(limits), float(designed.initial_speed(limits)), "designed"),
+    }
+    reports = {}
+    for key, (inputs, v0, label) in maneuvers.items():
+        rep = fisher_report(model_fisher(model, theta, inputs, v0, **fisher))
+        rep["maneuver"], rep["v0"] = label, v0
+        rep["logdet_scaled"] = float(np.sum(np.log(rep["eigenvalues"])))
+        reports[key] = rep
+    return reports
+
+
+def _recording(model, theta, inputs, v0) -> Recording:
+    """The maneuver's inputs and noise-free simulated channels, as a recording."""
+    import jax.numpy as jnp
+
+    from ..simulator import solve
+
+    ys, _ = solve(model, jnp.asarray(theta, dtype=float), inputs, jnp.asarray(v0, dtype=float))
+    ys = np.asarray(ys, dtype=float)
+    return Recording(
+        t=np.asarray(inputs.ts, dtype=float),
+        steer=np.asarray(inputs.steer, dtype=float),
+        torque_front=np.asarray(inputs.torque_front, dtype=float),
+        torque_rear=np.asarray(inputs.torque_rear, dtype=float),
+        channels={c: ys[:, i] for i, c in enumerate(CHANNELS)},
+        source="designed maneuver (noise-free simulation)",
+        rate=1.0 / inputs.dt,
+        original_rate=1.0 / inputs.dt,
+    )

@@ -1,0 +1,121 @@
+"""`observability`: Fisher information and Cramér–Rao bounds of θ (and of enabled effects'
+parameters) for one maneuver."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from ..io import InputError, Recording
+from ..simulator import CHANNELS, SEED_CHANNELS, Inputs, Vehicle
+from ._validate import PROFILE_V0, checked_theta, checked_v0, first_speed, load_vehicle, noise_channels
+
+
+@dataclasses.dataclass
+class ObservabilityResult:
+    """The Fisher report (`vdsbi.diagnostics.fisher_report`) of one maneuver, with the maneuver,
+    v0, noise model, channels left out for want of a noise_std, and the effects enabled."""
+
+    report: dict[str, Any]
+
+    def markdown(self) -> str:
+        from ..diagnostics import report_markdown
+
+        r = self.report
+        return report_markdown(
+            r, title=f"Observability: {r['maneuver']}, v0 = {r['v0']:.3g} m/s, {r['noise']} noise"
+        )
+
+    def save(self, out: str | os.PathLike) -> None:
+        """fisher.json and fisher.md into the directory `out`."""
+        out = Path(out)
+        (out / "fisher.json").write_text(json.dumps(self.report, indent=2, allow_nan=True) + "\n")
+        (out / "fisher.md").write_text(self.markdown())
+
+
+def observability(
+    vehicle: str | os.PathLike | Vehicle,
+    maneuver: Recording | Inputs,
+    *,
+    theta: Mapping[str, float] | Sequence[float] | None = None,
+    v0: float | None = None,
+    channels: Sequence[str] | None = None,
+    noise: str = "seed",
+    effects: Sequence[str] = (),
+    effect_params: Mapping[str, Mapping[str, float]] | None = None,
+    label: str | None = None,
+) -> ObservabilityResult:
+    """Fisher information of the parameters for `maneuver`, by forward-mode autodiff through
+    the noise-free simulator in float64.
+
+    Args:
+        vehicle: vehicle constants (file or object).
+        maneuver: a recording (its inputs; by default its channels and first speed) or an
+            `Inputs` profile (by default the seed's five channels and v0 = 10.5 m/s).
+        theta: parameters (array or {name: value} over the seed's Table II truth).
+        v0: initial speed, m/s.
+        channels: measured channels.
+        noise: "seed" (relative) or "vehicle" (additive noise_std; channels without one are
+            left out).
+        effects, effect_params: effects to enable (their parameters join the matrix) and
+            {effect: {param: value}}.
+        label: the maneuver's name in the report (default: the recording's file, or "inputs").
+
+    Raises:
+        InputError: a value that does not fit the vehicle or the maneuver.
+    """
+    import jax
+
+    veh, source = load_vehicle(vehicle)
+    rec = maneuver if isinstance(maneuver, Recording) else None
+    inputs = rec.inputs() if rec is not None else maneuver
+    channels = list(channels or (rec.channel_names if rec is not None else SEED_CHANNELS))
+    bad = [c for c in channels if c not in CHANNELS]
+    if bad:
+        raise InputError(
+            "--channels", "value", f"unknown channel(s) {bad} (expected some of {list(CHANNELS)})"
+        )
+    if v0 is None:
+        v0 = first_speed(rec, veh) if rec is not None else PROFILE_V0
+    v0 = checked_v0(v0)
+    channels, dropped = noise_channels(channels, noise, veh, source)
+    th = checked_theta(theta, veh)
+    model, params = _model(veh, effects, effect_params)
+    from ..diagnostics import fisher_report, model_fisher
+
+    with jax.enable_x64(True):
+        import jax.numpy as jnp
+
+        fisher = model_fisher(
+            model,
+            jnp.asarray(th, dtype=float),
+            inputs,
+            v0,
+            tuple(jnp.asarray(p, dtype=float) for p in params),
+            channels=channels,
+            noise=noise,
+            noise_std=veh.noise_std,
+        )
+        rep = fisher_report(fisher)
+    rep["maneuver"] = label or (rec.source if rec is not None else "inputs")
+    rep["v0"] = v0
+    rep["noise"] = noise
+    rep["channels_without_noise_std"] = dropped
+    rep["effects"] = list(effects)
+    return ObservabilityResult(rep)
+
+
+def _model(vehicle: Vehicle, effects: Sequence[str], effect_params):
+    """The model with `effects` enabled and the effects' parameter vectors."""
+    from ..simulator import effect_params_from, make_model
+
+    try:
+        model = make_model(vehicle, list(effects))
+        _, params = effect_params_from(list(effects), effect_params)
+    except ValueError as err:
+        raise InputError("arguments", "value", str(err)) from None
+    return model, params

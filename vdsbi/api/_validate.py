@@ -1,0 +1,108 @@
+"""Checks of the values `simulate`, `observability` and `design` share: the vehicle, θ, the
+initial speed and the channels a noise model can measure. Each failure is an `InputError`
+naming the value."""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from ..io import InputError, read_vehicle
+from ..simulator import PARAM_NAMES, SEED_TRUE_THETA, Vehicle, check_theta, default_vehicle
+
+#: Initial speed on a built-in profile, m/s (the middle of the seed's U[10, 11]).
+PROFILE_V0 = 10.5
+
+
+def load_vehicle(vehicle: str | os.PathLike | Vehicle | None) -> tuple[Vehicle, str]:
+    """(Vehicle, the name messages use) from a file, an object, or None for the built-in one."""
+    if vehicle is None:
+        return default_vehicle(), "vehicle"
+    if isinstance(vehicle, (str, os.PathLike)):
+        return read_vehicle(vehicle), str(vehicle)
+    return vehicle, "vehicle"
+
+
+def checked_theta(
+    theta: Mapping[str, float] | Sequence[float] | np.ndarray | None,
+    vehicle: Vehicle,
+    defaults: Mapping[str, float] = SEED_TRUE_THETA,
+) -> np.ndarray:
+    """θ in PARAM_NAMES order, from an array or {name: value} over `defaults`.
+
+    Raises:
+        InputError: an unknown name, or a value `check_theta` rejects (naming the parameter).
+    """
+    if theta is None or isinstance(theta, Mapping):
+        given = dict(theta or {})
+        unknown = [n for n in given if n not in PARAM_NAMES]
+        if unknown:
+            raise InputError(
+                "--theta", str(unknown[0]), f"unknown parameter; expected one of {list(PARAM_NAMES)}"
+            )
+        values = {**defaults, **given}
+        theta = [values[n] for n in PARAM_NAMES]
+    theta = np.asarray(theta, dtype=float)
+    try:
+        check_theta(theta, vehicle)
+    except ValueError as err:
+        name = _culprit(theta, vehicle, defaults)
+        raise InputError("--theta", name, str(err).removeprefix("theta: ")) from None
+    return theta
+
+
+def _culprit(theta: np.ndarray, vehicle: Vehicle, defaults: Mapping[str, float]) -> str:
+    """The first parameter that `check_theta` rejects on its own (with the others at `defaults`)."""
+    base = np.array([defaults[n] for n in PARAM_NAMES], dtype=float)
+    if theta.shape != base.shape:
+        return "theta"
+    for i, name in enumerate(PARAM_NAMES):
+        probe = base.copy()
+        probe[i] = theta[i]
+        try:
+            check_theta(probe, vehicle)
+        except ValueError:
+            return name
+    return "theta"
+
+
+def checked_v0(v0: float) -> float:
+    """A finite initial speed > 0 m/s."""
+    if not (math.isfinite(v0) and v0 > 0):
+        raise InputError("--v0", "v0", f"initial speed must be > 0 m/s, got {v0}")
+    return float(v0)
+
+
+def first_speed(rec, vehicle: Vehicle) -> float:
+    """The recording's speed at its first sample (vx, else the wheel speeds), m/s."""
+    speed = rec.speed(vehicle.wheel_radius)
+    if speed is None:
+        raise InputError(rec.source, "v0", "the recording has neither vx nor wheel speeds; give --v0")
+    v0 = float(speed[0])
+    if not (math.isfinite(v0) and v0 > 0):
+        raise InputError(rec.source, "v0", f"initial speed {v0:g} m/s is not > 0; give --v0")
+    return v0
+
+
+def noise_channels(
+    channels: Sequence[str], noise: str, vehicle: Vehicle, source: str
+) -> tuple[list[str], list[str]]:
+    """(channels kept, channels dropped): with "vehicle" noise, those without a noise_std go.
+
+    Raises:
+        InputError: no channel is left.
+    """
+    if noise != "vehicle":
+        return list(channels), []
+    dropped = [c for c in channels if not vehicle.noise_std.get(c, 0.0) > 0]
+    kept = [c for c in channels if c not in dropped]
+    if not kept:
+        raise InputError(
+            source,
+            "noise_std",
+            f"--noise vehicle needs a positive noise_std for at least one measured channel of {dropped}",
+        )
+    return kept, dropped
