@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-EDGES: tuple[str, ...] = ("odd", "hold")
+EDGES: tuple[str, ...] = ("odd", "even", "hold")
 
 
 class Decimator(eqx.Module):
@@ -29,15 +29,18 @@ class Decimator(eqx.Module):
     below −50 dB above cutoff + Δf/2. The taps sum to 1 exactly (DC passes unchanged).
 
     Edges are padded by `edge`: "odd" reflects the signal through its end value
-    (2·y₀ − y_k; keeps value and slope, so a ramp passes unchanged) or "hold" repeats the
-    end value.
+    (2·y₀ − y_k; keeps value and slope, so a ramp passes unchanged, scipy's filtfilt
+    default), "even" mirrors it (y_k; keeps the value, bends a ramp) or "hold" repeats the
+    end value. Within `edge_samples` output samples of either end the padding matters: with
+    "odd", the end sample itself carries much of the weight there, so its high-frequency
+    content (noise, vibration) is attenuated less than in the interior.
 
     Attributes:
         rate: input sample rate, Hz.
         cutoff: −6 dB frequency, Hz; at most the output Nyquist rate/(2·factor).
         factor: integer decimation factor (1: filter only).
         transition: transition width Δf, Hz; None for Δf = cutoff.
-        edge: "odd" or "hold".
+        edge: "odd", "even" or "hold".
     """
 
     rate: float = eqx.field(static=True)
@@ -71,6 +74,11 @@ class Decimator(eqx.Module):
     @property
     def num_taps(self) -> int:
         return 2 * self.half_length + 1
+
+    @property
+    def edge_samples(self) -> int:
+        """Output samples at each end whose filter window reaches into the padding."""
+        return math.ceil(self.half_length / self.factor)
 
     @property
     def output_rate(self) -> float:
@@ -110,14 +118,17 @@ class Decimator(eqx.Module):
         squeeze = ys.ndim == 1
         x = ys[:, None] if squeeze else ys.reshape(ys.shape[0], -1)
         num, half = x.shape[0], self.half_length
-        if self.edge == "odd" and num <= half:
+        if self.edge != "hold" and num <= half:
             raise ValueError(
                 f"decimator: {num} samples are too few for a {self.num_taps}-tap filter "
-                f"with odd reflection (need > {half}); use edge='hold' or a higher cutoff"
+                f"with reflected edges (need > {half}); use edge='hold' or a higher cutoff"
             )
         if self.edge == "odd":
             head = 2 * x[:1] - x[half:0:-1]
             tail = 2 * x[-1:] - x[-2 : -half - 2 : -1]
+        elif self.edge == "even":
+            head = x[half:0:-1]
+            tail = x[-2 : -half - 2 : -1]
         else:
             head = jnp.repeat(x[:1], half, axis=0)
             tail = jnp.repeat(x[-1:], half, axis=0)
