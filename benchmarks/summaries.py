@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from vdsbi.diagnostics import expected_coverage, sbc_ks_pvalues, sbc_ranks
-from vdsbi.inference import IdentifySettings, NPEConfig, apt, make_embedding, observation, seed_prior
+from vdsbi.inference import IdentifySettings, NPEConfig, identify, observation, seed_prior
 from vdsbi.simulator import (
     PARAM_NAMES,
     SEED_CHANNELS,
@@ -108,6 +108,7 @@ def main(argv=None):
             rounds=1,
             sims_per_round=n_sims,
             embedding=emb,
+            num_samples=n_post,
             config=NPEConfig(
                 batch_size=256,
                 learning_rate=1e-3,
@@ -115,26 +116,11 @@ def main(argv=None):
                 patience=args.patience,
             ),
         )
-        obs = jax.jit(jax.vmap(lambda r: observation(r, u, emb)))
-        x_test = np.asarray(obs(ys_test))
-
-        def simulate(k, theta):
-            ys, ok = simulator(k, jnp.asarray(theta, jnp.float32))
-            return obs(ys), ok
-
         t0 = time.perf_counter()
-        embedding = make_embedding(jax.random.key(1), x_test.shape[1:], settings)
-        posterior, state = apt(
-            k_train,
-            simulate,
-            prior,
-            x_test[0],
-            embedding=embedding,
-            rounds=1,
-            sims_per_round=n_sims,
-            config=settings.npe_config,
-        )
+        posterior, _, state = identify(k_train, simulator, prior, ys_test[0], settings)
         train_s = time.perf_counter() - t0
+        # The held-out sets as the estimator sees them (what `identify` does to its observation).
+        x_test = np.asarray(jax.vmap(lambda r: observation(r, u, emb))(ys_test))
         t0 = time.perf_counter()
         keys = jax.random.split(k_rest, n_test)
         sample_one = lambda k, x: posterior.sample(k, n_post, x=x)
