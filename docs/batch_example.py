@@ -2,9 +2,9 @@
 
     python docs/batch_example.py [--n 4] [--sims 300] [--rounds 2]
 
-For each true θ (drawn from the built-in vehicle's prior) it simulates a 4 s drive with sensor
-noise, identifies θ from it with `vdsbi.api.identify`, and prints truth, posterior mean and
-whether the 90 % interval covers the truth.
+For each true θ (drawn from the built-in vehicle's prior) it simulates a 4 s drive with the
+vehicle's sensor noise (`vdsbi.api.simulate`), identifies θ from it with `vdsbi.api.identify`,
+and prints truth, posterior mean and whether the 90 % interval covers the truth.
 """
 
 from __future__ import annotations
@@ -15,8 +15,7 @@ import jax
 import numpy as np
 
 from vdsbi import api
-from vdsbi.io import build_recording
-from vdsbi.simulator import CHANNELS, PARAM_NAMES, Vehicle, default_vehicle, seed_profile
+from vdsbi.simulator import PARAM_NAMES, Vehicle, default_vehicle, seed_profile
 
 NOISE = {"ax": 0.05, "ay": 0.05, "yaw_rate": 0.005, "omega_front": 0.1, "omega_rear": 0.1, "vx": 0.05}
 
@@ -37,18 +36,10 @@ def main() -> None:
         jax.random.uniform(jax.random.key(1), (args.n, 6), minval=0.2, maxval=0.8)
     )
     inputs = seed_profile(duration=4.0)
-    rng = np.random.default_rng(0)
     rows = []
     for i, theta in enumerate(thetas):
-        sim = api.simulate(theta, inputs, vehicle, v0=10.0)
-        cols = {"t": sim.t, "steer": np.asarray(inputs.steer)}
-        cols |= {
-            "torque_front": np.asarray(inputs.torque_front),
-            "torque_rear": np.asarray(inputs.torque_rear),
-        }
-        for j, c in enumerate(CHANNELS):
-            cols[c] = sim.readings[:, j] + rng.normal(0.0, NOISE[c], sim.t.shape[0])
-        rec = build_recording(cols, f"batch-{i}")
+        sim = api.simulate(theta, inputs, vehicle, v0=10.0, noise="vehicle", seed=i)
+        rec = sim.to_recording(f"batch-{i}")
         res = api.identify(rec, vehicle, rounds=args.rounds, sims=args.sims, embedding="stats", seed=i)
         for name, t in zip(PARAM_NAMES, theta):
             p = res.summary["parameters"][name]
