@@ -127,3 +127,23 @@ def test_stochastic_simulator_filters_the_noise(getkey):
     np.testing.assert_allclose(yd, jax.vmap(dec)(ys), rtol=1e-5, atol=1e-6)
     # The noise is filtered: less scatter around a smooth trajectory than before.
     assert np.std(np.diff(np.asarray(yd[0, :, 0]))) < 0.5 * np.std(np.diff(np.asarray(ys[0, ::FACTOR, 0])))
+
+
+def test_stochastic_simulator_lateral0_field_and_argument(getkey):
+    inputs = seed_profile(0.5)
+    theta = jnp.tile(jnp.array([SEED_TRUE_THETA[n] for n in PARAM_NAMES]), (2, 1))
+    lateral0 = jnp.array([[0.1, 0.05], [-0.2, -0.1]])
+    kwargs = dict(
+        model=make_model(default_vehicle()),
+        inputs=inputs,
+        channels=("yaw_rate", "ay"),
+        v0_range=(10.0, 11.0),
+        sensor_noise=sensor_noise("none"),
+    )
+    key = getkey()
+    fixed, _ = StochasticSimulator(**kwargs, lateral0=lateral0)(key, theta)
+    given, _ = StochasticSimulator(**kwargs)(key, theta, lateral0=lateral0)
+    straight, _ = StochasticSimulator(**kwargs)(key, theta)
+    np.testing.assert_array_equal(fixed, given)
+    np.testing.assert_allclose(fixed[:, 0, 0], lateral0[:, 1])  # the first yaw rate is r0
+    assert np.all(straight[:, 0, 0] == 0)
