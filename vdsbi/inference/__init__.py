@@ -60,3 +60,4 @@ from ._vehicle import (
     observation as observation,
     seed_prior as seed_prior,
 )
+from ._windowed import identify_problem as identify_problem, input_channels as input_channels

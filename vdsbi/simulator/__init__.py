@@ -26,6 +26,7 @@ from ._sensors import (
     StiffnessMixtureNoise as StiffnessMixtureNoise,
     sensor_noise as sensor_noise,
 )
+from ._sharding import shard_draws as shard_draws
 from ._solve import (
     TRACE_COUNT as TRACE_COUNT,
     Solver as Solver,

@@ -1,0 +1,91 @@
+"""Identifying θ by APT on a whole `Problem`: every training window of a drive, jointly."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, PRNGKeyArray
+
+from ..problem import Problem, simulate_draws, windowed_model
+from ..simulator import Solver
+from ._apt import APTState, apt
+from ._posterior import Posterior
+from ._prior import BoxPrior
+from ._vehicle import IdentifySettings, make_embedding, observation
+
+
+def input_channels(problem: Problem) -> Float[Array, "W K I"]:
+    """What drives each window, on the compared samples: steer and the torques (torque mode)
+    or steer and the measured speed (speed mode), filtered like the measurement."""
+    if problem.longitudinal == "speed":
+        u = jnp.stack([jnp.asarray(problem.u[..., 0]), jnp.asarray(problem.speed)], axis=-1)
+    else:
+        u = jnp.asarray(problem.u)
+    if problem.decimator is not None:
+        u = jax.vmap(problem.decimator)(u)
+    return u
+
+
+def flatten_windows(ys: Float[Array, "N W K C"], mask: np.ndarray) -> Float[Array, "N L C"]:
+    """Concatenate the windows along time, zeroing samples outside `mask` (fixed shapes)."""
+    ys = jnp.where(jnp.asarray(mask)[None, :, :, None], ys, 0.0)
+    return ys.reshape(ys.shape[0], -1, ys.shape[-1])
+
+
+def identify_problem(
+    key: PRNGKeyArray,
+    problem: Problem,
+    prior: BoxPrior,
+    settings: IdentifySettings = IdentifySettings(),
+    *,
+    effects: Sequence[str] = (),
+    solver: Solver = Solver(),
+    on_round_end: Callable[[APTState], None] | None = None,
+    on_epoch_end: Callable | None = None,
+    on_simulate: Callable[[int], None] | None = None,
+    state: APTState | None = None,
+) -> tuple[Posterior, np.ndarray, APTState]:
+    """Posterior over θ from the training part of `problem` (all its windows at once).
+
+    Simulated draws get white sensor noise at the model rate and then the problem's filter,
+    as the measurement does; in torque mode each window's initial speed is jittered by the
+    uncertainty of its measured value. The held-out part is not seen.
+
+    Returns:
+        (posterior at the observation, (num_samples, 6) samples, final APT state).
+    """
+    train = problem.select("train")
+    wm = windowed_model(train, effects, solver)
+    mask = train.train
+    u = flatten_windows(input_channels(train)[None], mask)[0].astype(jnp.float32)
+    to_x = jax.jit(jax.vmap(lambda r: observation(r, u, settings.embedding)))
+    x_o = to_x(flatten_windows(jnp.asarray(train.y)[None], mask).astype(jnp.float32))[0]
+    jitter = 0.0 if train.longitudinal == "speed" else 0.2 + 0.02 * float(np.mean(train.v0))
+
+    def simulate(k, theta):
+        if on_simulate is not None:
+            on_simulate(theta.shape[0])
+        ys, ok = simulate_draws(k, wm, jnp.asarray(theta), sigma_raw=train.sigma_raw, v0_jitter=jitter)
+        return to_x(flatten_windows(ys, mask).astype(jnp.float32)), ok
+
+    k_emb, k_apt, k_s = jax.random.split(key, 3)
+    embedding = make_embedding(k_emb, x_o.shape, settings)
+    posterior, state = apt(
+        k_apt,
+        simulate,
+        prior,
+        x_o,
+        embedding=embedding,
+        rounds=settings.rounds,
+        sims_per_round=settings.sims_per_round,
+        config=settings.npe_config,
+        truncate=settings.truncate,
+        on_round_end=on_round_end,
+        on_epoch_end=on_epoch_end,
+        state=state,
+    )
+    samples = np.asarray(posterior.sample(k_s, settings.num_samples))
+    return posterior, samples, state
