@@ -1,8 +1,9 @@
 """Command-line interface: `vdsbi <command> ...`.
 
 Each command lives in its own module exposing `add_parser(subparsers)` (adds and returns its
-argparse sub-parser) and `run(args) -> int` (the exit status). To add a command, write the module
-and list it in `COMMANDS`.
+argparse sub-parser) and `run(args) -> int` (the exit status). `run` parses the arguments (option
+values shared by several commands through `_args`), calls `vdsbi.api` and prints; the work is
+done there. To add a command, write the module and list it in `COMMANDS`.
 """
 
 #: Modules (relative to this package) that each provide one subcommand, in help order.
