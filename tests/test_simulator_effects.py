@@ -55,6 +55,10 @@ def test_built_in_effects_are_the_ten_of_the_issue():
     for cls in EFFECTS.values():
         n = len(cls.param_names)
         assert len(cls.units) == len(cls.null) == len(cls.typical) == n and cls.description
+        # discovery's fit box contains the typical range, and the start lies inside it
+        assert len(cls.bounds) == len(cls.start) == n
+        for (lo, hi), (a, b), x0 in zip(cls.bounds, cls.typical, cls.start):
+            assert lo <= a <= b <= hi and lo < x0 < hi
 
 
 @eqx.filter_jit
@@ -267,6 +271,8 @@ def test_eleventh_effect_takes_one_class_and_one_line(x64):
         units = ("N",)
         null = (0.0,)
         typical = ((0.0, 2000.0),)
+        bounds = ((0.0, 5000.0),)
+        start = (100.0,)
         description = "constant rearward pull"
 
         def body_force(self, p, ctx):
@@ -290,10 +296,20 @@ def test_eleventh_effect_takes_one_class_and_one_line(x64):
         assert ok
         d_ax = ys[:, I["ax"]] - base[:, I["ax"]]
         assert abs(d_ax.mean() + 450.0 / VEHICLE.mass) < 0.05 * 450.0 / VEHICLE.mass
-        attrs = {a: getattr(TowForce, a) for a in ("name", "param_names", "units", "null", "typical")}
+        meta = ("name", "param_names", "units", "null", "typical", "bounds", "start")
+        attrs = {a: getattr(TowForce, a) for a in meta}
         clash = type("Clash", (AbstractEffect,), {**attrs, "description": "same name"})
         with pytest.raises(ValueError, match="already registered"):
             register_effect(clash)
+        # metadata is checked: a start on the edge of the fit box, and missing bounds
+        edge = type("Edge", (AbstractEffect,), {**attrs, "name": "edge", "start": (0.0,), "description": "x"})
+        with pytest.raises(ValueError, match="strictly inside"):
+            register_effect(edge)
+        attrs.pop("bounds")
+        partial = type("Partial", (AbstractEffect,), {**attrs, "name": "partial", "description": "x"})
+        with pytest.raises(ValueError, match="bounds"):
+            register_effect(partial)
+        assert "edge" not in EFFECTS and "partial" not in EFFECTS
     finally:
         EFFECTS.pop("test_tow_force", None)
     with pytest.raises(ValueError, match="test_tow_force"):

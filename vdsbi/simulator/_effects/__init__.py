@@ -12,22 +12,11 @@ from ._steering_lag import SteeringLag as SteeringLag
 from ._torque_lag import TorqueLag as TorqueLag
 from ._wheel_radius_error import WheelRadiusError as WheelRadiusError
 
-#: Registry: name -> effect class.
-EFFECTS: dict[str, type[AbstractEffect]] = {
-    cls.name: cls
-    for cls in (
-        AeroDrag,
-        RollingResistance,
-        RoadGrade,
-        RoadBank,
-        SteeringLag,
-        TorqueLag,
-        ImuLeverArm,
-        ImuMisalignment,
-        SensorBias,
-        WheelRadiusError,
-    )
-}
+#: Registry: name -> effect class, in search order. Filled by `register_effect` below; read
+#: at call time by everything that lists effects (simulation, identification, discovery).
+EFFECTS: dict[str, type[AbstractEffect]] = {}
+
+_METADATA = ("name", "param_names", "units", "null", "typical", "bounds", "start", "description")
 
 
 def get_effect(name: str) -> AbstractEffect:
@@ -36,19 +25,46 @@ def get_effect(name: str) -> AbstractEffect:
     return EFFECTS[name]()
 
 
+def _check_metadata(cls: type[AbstractEffect]) -> None:
+    where = f"effects: {cls.__name__}"
+    missing = [a for a in _METADATA if not hasattr(cls, a)]
+    if missing:
+        raise ValueError(f"{where} lacks class attribute(s) {missing}")
+    n = len(cls.param_names)
+    if not len(cls.units) == len(cls.null) == len(cls.typical) == len(cls.bounds) == len(cls.start) == n:
+        raise ValueError(f"{where}: param_names, units, null, typical, bounds, start differ in length")
+    for p, (lo, hi), (t_lo, t_hi), x0 in zip(cls.param_names, cls.bounds, cls.typical, cls.start):
+        # A start on the edge of the box has no finite unbounded coordinate in the fit.
+        if not lo < x0 < hi:
+            raise ValueError(f"{where}: start of '{p}' ({x0}) must lie strictly inside bounds ({lo}, {hi})")
+        if not lo <= t_lo <= t_hi <= hi:
+            raise ValueError(f"{where}: typical range of '{p}' must lie inside its bounds")
+
+
 def register_effect(cls: type[AbstractEffect]) -> type[AbstractEffect]:
     """Add an effect class to `EFFECTS` under `cls.name` (usable as a class decorator).
 
-    The built-in effects are listed in `EFFECTS` above; this is for effects defined outside
-    the package (experiments, tests). Raises ValueError on a duplicate or incomplete class.
+    Checks the class's metadata (see `AbstractEffect`). An effect registered here is
+    simulated, identified and searched for by discovery like a built-in one. Raises
+    ValueError on a duplicate name or incomplete or inconsistent metadata.
     """
-    needed = ("name", "param_names", "units", "null", "typical", "description")
-    missing = [a for a in needed if not hasattr(cls, a)]
-    if missing:
-        raise ValueError(f"effects: {cls.__name__} lacks class attribute(s) {missing}")
-    if not len(cls.param_names) == len(cls.units) == len(cls.null) == len(cls.typical):
-        raise ValueError(f"effects: {cls.__name__}: param_names, units, null, typical differ in length")
+    _check_metadata(cls)
     if cls.name in EFFECTS and EFFECTS[cls.name] is not cls:
         raise ValueError(f"effects: an effect named '{cls.name}' is already registered")
     EFFECTS[cls.name] = cls
     return cls
+
+
+for _cls in (
+    AeroDrag,
+    RollingResistance,
+    RoadGrade,
+    RoadBank,
+    SteeringLag,
+    TorqueLag,
+    ImuLeverArm,
+    ImuMisalignment,
+    SensorBias,
+    WheelRadiusError,
+):
+    register_effect(_cls)

@@ -13,6 +13,8 @@ class AeroDrag(AbstractEffect):
     units = ("m^2",)
     null = (0.0,)
     typical = ((0.4, 1.0),)
+    bounds = ((0.0, 2.5),)
+    start = (0.3,)
     description = "aerodynamic drag (force ∝ speed², felt by the accelerometer)"
 
     def body_force(self, p, ctx):

@@ -1,11 +1,13 @@
-"""The interface every physics effect implements; all hooks default to 'no effect'."""
+"""The interface every physics effect implements; all hooks default to 'no effect'.
 
-from __future__ import annotations
+(No `from __future__ import annotations` here: equinox needs `AbstractClassVar` unstringified.)
+"""
 
 from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 import jax.numpy as jnp
+from equinox import AbstractClassVar
 from jaxtyping import Array, Float
 
 
@@ -29,17 +31,28 @@ class Context(NamedTuple):
 class AbstractEffect(eqx.Module):
     """A physics effect left out of the base model.
 
-    Class attributes describe its parameters: `param_names`, their `units`, the `null` values
-    at which the effect vanishes, and `typical` (low, high) ranges used as priors when the
-    effect is searched for. Hooks receive `p`, the effect's parameter vector.
+    Class attributes describe the effect and its parameters, one entry per parameter:
+
+    - `param_names`, their `units`;
+    - `null`: the values at which the effect vanishes (the base model exactly);
+    - `typical`: (low, high) magnitudes met on real cars, used to simulate the effect and as
+      the scale of its parameters in Fisher information;
+    - `bounds`: (low, high) box inside which discovery fits the parameter, wider than
+      `typical` so an estimate is not pinned by the bound (physical sign constraints where
+      they exist);
+    - `start`: where a fit starts when the effect is switched on, strictly inside `bounds`.
+
+    `register_effect` checks them. Hooks receive `p`, the effect's parameter vector.
     """
 
-    name: ClassVar[str]
-    param_names: ClassVar[tuple[str, ...]]
-    units: ClassVar[tuple[str, ...]]
-    null: ClassVar[tuple[float, ...]]
-    typical: ClassVar[tuple[tuple[float, float], ...]]
-    description: ClassVar[str]
+    name: AbstractClassVar[str]
+    param_names: AbstractClassVar[tuple[str, ...]]
+    units: AbstractClassVar[tuple[str, ...]]
+    null: AbstractClassVar[tuple[float, ...]]
+    typical: AbstractClassVar[tuple[tuple[float, float], ...]]
+    bounds: AbstractClassVar[tuple[tuple[float, float], ...]]
+    start: AbstractClassVar[tuple[float, ...]]
+    description: AbstractClassVar[str]
     num_states: ClassVar[int] = 0
 
     def init_state(self, p, u0: Float[Array, "3"]) -> Float[Array, " S"]:

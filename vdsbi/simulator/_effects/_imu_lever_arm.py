@@ -9,6 +9,8 @@ class ImuLeverArm(AbstractEffect):
     units = ("m", "m")
     null = (0.0, 0.0)
     typical = ((-1.0, 1.0), (-0.4, 0.4))
+    bounds = ((-2.5, 2.5), (-1.0, 1.0))
+    start = (0.0, 0.0)
     description = "IMU away from the CoG (ay gains dx·ṙ, ax gains −dy·ṙ, centripetal −r²·d)"
 
     def measure(self, p, y, ctx):

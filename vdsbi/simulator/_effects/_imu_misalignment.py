@@ -15,6 +15,8 @@ class ImuMisalignment(AbstractEffect):
     units = ("rad", "rad")
     null = (0.0, 0.0)
     typical = ((-0.05, 0.05), (-0.05, 0.05))
+    bounds = ((-0.15, 0.15), (-0.15, 0.15))
+    start = (0.0, 0.0)
     description = "IMU mounted rotated (roll: constant ay offset; yaw: ax leaks into ay)"
 
     def measure(self, p, y, ctx):

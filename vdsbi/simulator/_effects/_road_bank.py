@@ -11,6 +11,8 @@ class RoadBank(AbstractEffect):
     units = ("rad",)
     null = (0.0,)
     typical = ((-0.06, 0.06),)
+    bounds = ((-0.15, 0.15),)
+    start = (0.0,)
     description = "road bank (gravity along y, balanced by tire side force: ay offset with drift)"
 
     def gravity_accel(self, p, ctx):

@@ -11,6 +11,8 @@ class RoadGrade(AbstractEffect):
     units = ("rad",)
     null = (0.0,)
     typical = ((-0.06, 0.06),)
+    bounds = ((-0.15, 0.15),)
+    start = (0.0,)
     description = "road grade (gravity along x: speed changes the accelerometer does not see)"
 
     def gravity_accel(self, p, ctx):

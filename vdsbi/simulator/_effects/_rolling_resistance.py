@@ -15,6 +15,8 @@ class RollingResistance(AbstractEffect):
     units = ("-",)
     null = (0.0,)
     typical = ((0.005, 0.03),)
+    bounds = ((0.0, 0.08),)
+    start = (0.004,)
     description = "rolling resistance (constant drag ∝ load, felt by the accelerometer)"
 
     def wheel_torque(self, p, ctx):

@@ -9,6 +9,8 @@ class SensorBias(AbstractEffect):
     units = ("m/s^2", "m/s^2", "rad/s")
     null = (0.0, 0.0, 0.0)
     typical = ((-0.5, 0.5), (-0.5, 0.5), (-0.02, 0.02))
+    bounds = ((-2.0, 2.0), (-2.0, 2.0), (-0.08, 0.08))
+    start = (0.0, 0.0, 0.0)
     description = "IMU offsets (constant shift of ax, ay, yaw_rate without dynamics)"
 
     def measure(self, p, y, ctx):

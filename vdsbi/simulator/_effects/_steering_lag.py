@@ -14,6 +14,8 @@ class SteeringLag(AbstractEffect):
     units = ("s",)
     null = (0.0,)
     typical = ((0.03, 0.3),)
+    bounds = ((0.005, 0.8),)
+    start = (0.04,)
     description = "steering actuator/compliance lag (yaw and ay lag the recorded steer)"
     num_states = 1
 

@@ -12,6 +12,8 @@ class TorqueLag(AbstractEffect):
     units = ("s",)
     null = (0.0,)
     typical = ((0.05, 0.5),)
+    bounds = ((0.005, 1.2),)
+    start = (0.05,)
     description = "powertrain/brake actuator lag (ax and wheel speeds lag the recorded torque)"
     num_states = 2
 

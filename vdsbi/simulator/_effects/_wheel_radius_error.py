@@ -9,6 +9,8 @@ class WheelRadiusError(AbstractEffect):
     units = ("-",)
     null = (0.0,)
     typical = ((-0.05, 0.05),)
+    bounds = ((-0.15, 0.15),)
+    start = (0.0,)
     description = "tire radius differs from the data sheet (wheel speeds scale by 1/(1+e))"
 
     def radius_scale(self, p):
