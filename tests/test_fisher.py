@@ -12,6 +12,8 @@ from vdsbi.diagnostics import (
     fisher_information,
     fisher_report,
     gauss_newton_fit,
+    laplace_covariance,
+    levenberg_marquardt,
     model_fisher,
     noise_std,
     score_fisher_mc,
@@ -161,6 +163,31 @@ def test_gauss_newton_fit_recovers_linear_model(x64, getkey):
     z_ls = np.linalg.lstsq(w, (x / std).reshape(-1), rcond=None)[0]
     np.testing.assert_allclose(fit.z, z_ls, rtol=1e-6)
     np.testing.assert_allclose(fit.cov_z, np.linalg.inv(fisher_information(mean, z_true, std)), rtol=1e-9)
+
+
+def test_levenberg_marquardt_with_prior_is_ridge_and_compiles_once(x64, getkey):
+    # Linear residual + Gaussian prior: the minimiser is the ridge solution and the Laplace
+    # covariance is (AᵀA + diag(prec))⁻¹ exactly; the iteration cap is traced, not static.
+    a = jax.random.normal(getkey(), (40, 3))
+    y = jax.random.normal(getkey(), (40,))
+    prec, mean = jnp.array([0.5, 2.0, 1.0]), jnp.array([1.0, -1.0, 0.0])
+    traces = []
+
+    @jax.jit
+    def fit(z0, max_steps):
+        traces.append(None)
+        return levenberg_marquardt(
+            lambda z: a @ z - y, z0, prior_precision=prec, prior_mean=mean, max_steps=max_steps, damping=1e-9
+        )
+
+    short, sol = fit(jnp.zeros(3), 1), fit(jnp.zeros(3), 10)
+    assert len(traces) == 1 and int(short.num_steps) == 1 and bool(sol.converged)
+    h = a.T @ a + jnp.diag(prec)
+    np.testing.assert_allclose(sol.z, np.linalg.solve(h, a.T @ y + prec * mean), rtol=1e-9)
+    np.testing.assert_allclose(laplace_covariance(sol.jacobian, prec), np.linalg.inv(h), rtol=1e-9)
+    assert float(sol.cost) == pytest.approx(
+        0.5 * float(jnp.sum((a @ sol.z - y) ** 2)) + 0.5 * float(jnp.sum(prec * (sol.z - mean) ** 2))
+    )
 
 
 def test_cli_observability_writes_fisher_json(tmp_path):

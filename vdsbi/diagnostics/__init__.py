@@ -17,17 +17,23 @@ from ._design import (
 )
 from ._fisher import (
     Fisher as Fisher,
-    FitResult as FitResult,
     fisher_from_jacobian as fisher_from_jacobian,
     fisher_information as fisher_information,
     fisher_report as fisher_report,
-    gauss_newton_fit as gauss_newton_fit,
     model_fisher as model_fisher,
     noise_model as noise_model,
     noise_std as noise_std,
     param_names as param_names,
     report_markdown as report_markdown,
     score_fisher_mc as score_fisher_mc,
+)
+from ._least_squares import (
+    FitResult as FitResult,
+    LeastSquaresResult as LeastSquaresResult,
+    gauss_newton_fit as gauss_newton_fit,
+    laplace_covariance as laplace_covariance,
+    levenberg_marquardt as levenberg_marquardt,
+    logit as logit,
 )
 from ._misspecification import (
     Localisation as Localisation,

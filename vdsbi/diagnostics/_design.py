@@ -38,7 +38,8 @@ from ..simulator import (
     VehicleModel,
     solve,
 )
-from ._fisher import noise_model, noise_std
+from ._fisher import noise_model, scaled_fisher
+from ._least_squares import logit
 
 _AY = CHANNELS.index("ay")
 _VX = CHANNELS.index("vx")
@@ -95,11 +96,6 @@ class Limits(eqx.Module):
         return self.ay_fraction * friction * GRAVITY
 
 
-def _logit(p):
-    p = np.clip(p, 1e-6, 1 - 1e-6)
-    return float(np.log(p / (1 - p)))
-
-
 class Maneuver(eqx.Module):
     """Unconstrained maneuver parameters (map them with `inputs` / `initial_speed`).
 
@@ -134,11 +130,11 @@ class Maneuver(eqx.Module):
         v0 = (10.5 - limits.v0_min) / (limits.v0_max - limits.v0_min)
         return cls(
             steer_amp=jnp.asarray(amp),
-            steer_freq=jnp.asarray([_logit(p) for p in frac]),
+            steer_freq=jnp.asarray(logit(frac, eps=1e-6)),
             steer_phase=jnp.zeros(num_sines),
             pedal_level=jnp.asarray(np.arctanh(levels)),
             pedal_length=jnp.zeros(num_segments),
-            v0=jnp.asarray(_logit(v0)),
+            v0=jnp.asarray(float(logit(v0, eps=1e-6))),
         )
 
     def initial_speed(self, limits: Limits) -> Float[Array, ""]:
@@ -236,17 +232,19 @@ class DesignProblem(eqx.Module):
 
     def fisher_scaled(self, inputs: Inputs, v0) -> tuple[Float[Array, "6 6"], Float[Array, "T 6"], Array]:
         """Scaled F (θ/nominal), full readings, success flag."""
-        scale = self.scale
-        idx = jnp.asarray(self.channels)
-
-        def run(z):
-            ys, ok = solve(self.model, z * scale, inputs, v0, (), self.solver)
-            return ys[:, idx], (ys, ok)
-
-        jac, (ys, ok) = jax.jacfwd(run, has_aux=True)(self.theta / scale)
-        std = noise_std(ys[:, idx], self.relative, self.additive, self.floor_fraction)
-        w = jac / std[..., None]
-        return jnp.einsum("tcp,tcq->pq", w, w), ys, ok
+        f = scaled_fisher(
+            self.model,
+            self.theta / self.scale,
+            self.scale,
+            inputs,
+            v0,
+            jnp.asarray(self.channels),
+            self.relative,
+            self.additive,
+            self.floor_fraction,
+            self.solver,
+        )
+        return f.fim, f.readings, f.ok
 
     def information(self, fz):
         if self.target < 0:

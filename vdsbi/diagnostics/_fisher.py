@@ -1,4 +1,4 @@
-"""Observability by autodiff: Fisher information, Cramér–Rao bounds, and a Gauss–Newton check.
+"""Observability by autodiff: Fisher information and Cramér–Rao bounds.
 
 Measurement model (the Gaussian approximation the seed uses for its scores): the readings are
 x_t = μ_t(θ) + ε_t with ε_t ~ N(0, diag(σ_t²)) independent over samples t, and σ_t evaluated at
@@ -25,12 +25,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, PRNGKeyArray
+from jaxtyping import Array, Bool, Float, Int, PRNGKeyArray
 
 from ..simulator import (
     CHANNELS,
@@ -135,16 +136,6 @@ def score_fisher_mc(
 
     acc, _ = jax.lax.scan(body, jnp.zeros((jac.shape[-1],) * 2, jac.dtype), jax.random.split(key, n_chunks))
     return acc / (n_chunks * chunk)
-
-
-def _jacfwd_and_value(fn, z):
-    """(∂fn/∂z with its last axis over z, fn(z)) from one forward-mode pass."""
-
-    def both(z_):
-        y = fn(z_)
-        return y, y
-
-    return jax.jacfwd(both, has_aux=True)(z)
 
 
 # --------------------------------------------------------------------------- vehicle model
@@ -315,12 +306,66 @@ def scaled_mean_fn(model, scale, inputs, v0, idx, solver=Solver()):
     return mean
 
 
+class ScaledFisher(NamedTuple):
+    """Fisher information of z = θ/scale and what it was assembled from.
+
+    Attributes:
+        fim: (P, P) F in scaled units.
+        readings: (T, 6) noise-free readings, all channels.
+        ok: the solve's success flag.
+        std: (T, C) noise std of the used channels.
+        jac: (T, C, P) ∂readings/∂z of the used channels.
+    """
+
+    fim: Float[Array, "P P"]
+    readings: Float[Array, "T 6"]
+    ok: Bool[Array, ""]
+    std: Float[Array, "T C"]
+    jac: Float[Array, "T C P"]
+
+
+def scaled_fisher(
+    model: VehicleModel,
+    z: Float[Array, " P"],
+    scale: Float[Array, " P"],
+    inputs: Inputs,
+    v0: Float[Array, ""],
+    idx: Int[Array, " C"],
+    relative: Float[Array, " C"],
+    additive: Float[Array, " C"],
+    floor_fraction: float = FLOOR_FRACTION,
+    solver: Solver = Solver(),
+) -> ScaledFisher:
+    """F of the flat parameters (θ, then the model's effects') in scaled units, from one
+    forward-mode pass through `solve`: the Fisher assembly behind `model_fisher` and the
+    excitation-design objective. Traceable (differentiable in `inputs` and `v0`).
+
+    Args:
+        model: vehicle model.
+        z: (P,) parameters over `scale`.
+        scale: (P,) scaling, physical units.
+        inputs: the maneuver.
+        v0: initial speed, m/s.
+        idx: indices of the measured channels in CHANNELS.
+        relative, additive: noise model per measured channel (see `noise_std`).
+        floor_fraction: relative-noise floor.
+        solver: integration settings.
+    """
+
+    def run(z_):
+        theta, eps = _split(model, z_ * scale)
+        ys, ok = solve(model, theta, inputs, v0, eps, solver)
+        return ys[:, idx], (ys, ok)
+
+    jac, (ys, ok) = jax.jacfwd(run, has_aux=True)(z)
+    std = noise_std(ys[:, idx], relative, additive, floor_fraction)
+    return ScaledFisher(fisher_from_jacobian(jac, std), ys, ok, std, jac)
+
+
 @eqx.filter_jit
 def _model_fisher_scaled(model, z, scale, inputs, v0, idx, rel, add, floor_fraction, solver):
-    mean = scaled_mean_fn(model, scale, inputs, v0, idx, solver)
-    jac, ys = _jacfwd_and_value(mean, z)
-    std = noise_std(ys, rel, add, floor_fraction)
-    return fisher_from_jacobian(jac, std), ys, std, jac
+    f = scaled_fisher(model, z, scale, inputs, v0, idx, rel, add, floor_fraction, solver)
+    return f.fim, f.readings[:, idx], f.std, f.jac
 
 
 # --------------------------------------------------------------------------- report
@@ -434,54 +479,3 @@ def report_markdown(report: dict, title: str = "Observability") -> str:
     for n, row in zip(names, report["correlation"]):
         lines.append(f"| {n} | " + " | ".join(f"{x:+.2f}" for x in row) + " |")
     return "\n".join(lines) + "\n"
-
-
-# --------------------------------------------------------------------------- identification check
-
-
-class FitResult(eqx.Module):
-    """Levenberg–Marquardt fit in scaled units, with the Laplace (Gauss–Newton) covariance."""
-
-    z: Float[Array, " P"]
-    cov_z: Float[Array, "P P"]
-    cost: Float[Array, ""]
-
-
-def gauss_newton_fit(
-    mean_fn: Callable[[Float[Array, " P"]], Float[Array, "T C"]],
-    x: Float[Array, "T C"],
-    std: Float[Array, "T C"],
-    z0: Float[Array, " P"],
-    num_iters: int = 12,
-    damping: float = 1e-3,
-) -> FitResult:
-    """Maximum-likelihood (flat-prior MAP) fit of x ~ N(mean_fn(z), diag(std²)), one data set.
-
-    Levenberg–Marquardt with a fixed number of iterations (a step is kept only if it lowers
-    the cost; the damping shrinks ×1/3 on success and grows ×4 on failure), so it vmaps over
-    data sets. The Laplace covariance is (JᵀΣ⁻¹J)⁻¹ at the fit.
-    """
-
-    def cost_jac(z):
-        jac, mu = _jacfwd_and_value(mean_fn, z)
-        r = (x - mu) / std
-        return 0.5 * jnp.sum(r**2), jac / std[..., None], r
-
-    def cost(z):
-        r = (x - mean_fn(z)) / std
-        return jnp.where(jnp.all(jnp.isfinite(r)), 0.5 * jnp.sum(r**2), jnp.inf)
-
-    def step(carry, _):
-        z, lam = carry
-        c, w, r = cost_jac(z)
-        a = jnp.einsum("tcp,tcq->pq", w, w)
-        g = jnp.einsum("tcp,tc->p", w, r)
-        dz = jnp.linalg.solve(a + lam * jnp.diag(jnp.diag(a)), g)
-        c_new = cost(z + dz)
-        better = c_new < c
-        return (jnp.where(better, z + dz, z), jnp.where(better, lam / 3, lam * 4)), None
-
-    (z, _), _ = jax.lax.scan(step, (z0, jnp.asarray(damping, z0.dtype)), None, length=num_iters)
-    c, w, _ = cost_jac(z)
-    a = jnp.einsum("tcp,tcq->pq", w, w)
-    return FitResult(z=z, cov_z=jnp.linalg.inv(a), cost=c)
