@@ -43,7 +43,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from vdsbi.discovery import EFFECT_NAMES, diagnose  # noqa: E402
+from vdsbi.discovery import diagnose, effect_names  # noqa: E402
 from vdsbi.simulator import (  # noqa: E402
     CHANNELS,
     EFFECTS,
@@ -80,7 +80,8 @@ def draw_effect(rng, name):
 
 def case_list(per_effect: int, clean: int, pairs: int, seed: int):
     rng = np.random.default_rng(seed)
-    all_pairs = [(a, b) for i, a in enumerate(EFFECT_NAMES) for b in EFFECT_NAMES[i + 1 :]]
+    names = effect_names()
+    all_pairs = [(a, b) for i, a in enumerate(names) for b in names[i + 1 :]]
     pair_idx = rng.choice(len(all_pairs), size=pairs, replace=False)
     cases = []
     rounds = max(per_effect, clean, pairs)
@@ -88,7 +89,7 @@ def case_list(per_effect: int, clean: int, pairs: int, seed: int):
         if r < clean:
             cases.append(())
         if r < per_effect:
-            cases += [(e,) for e in EFFECT_NAMES]
+            cases += [(e,) for e in names]
         if r < pairs:
             cases.append(all_pairs[pair_idx[r]])
     for _ in range(rounds, clean):
@@ -199,7 +200,7 @@ def summarise(results: list[dict]) -> dict:
     singles = [r for r in results if len(r["truth"]) == 1]
     pairs = [r for r in results if len(r["truth"]) == 2]
     lab = lambda e: "+".join(e) if e else "none"
-    labels = ["none", *EFFECT_NAMES]
+    labels = ["none", *effect_names()]
     conf: dict = {}
     for r in results:
         t = lab(r["truth"]) if len(r["truth"]) < 2 else "pair"

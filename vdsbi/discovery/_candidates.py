@@ -1,11 +1,72 @@
-"""Candidate explanations: "none", the ten effects alone, and pairs among the strongest singles."""
+"""Candidate explanations: "none", each registered effect alone, and pairs among the strongest
+singles; and where the candidates' parameters sit in the fit. Everything is read from the effect
+registry (`vdsbi.simulator.EFFECTS`) at call time, so effects registered after import count."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from collections.abc import Sequence
 
-from ._fit import EFFECT_NAMES
+import numpy as np
+
+from ..simulator import EFFECTS
+
+
+def effect_names() -> tuple[str, ...]:
+    """The registered effects, in registry order: the candidates discovery searches."""
+    return tuple(EFFECTS)
+
+
+@dataclasses.dataclass(frozen=True)
+class EffectSpace:
+    """The effects of a super-model and where their parameters sit in one flat vector.
+
+    Built from the registry by `effect_space()` (at call time), so it includes effects
+    registered after import.
+
+    Attributes:
+        names: effect names, in registry order.
+        slices: each effect's slice of the flat effect-parameter vector.
+        lo, hi: (E,) fit bounds of every effect parameter.
+        null: (E,) values at which each effect vanishes.
+        start: (E,) starting values when an effect is switched on.
+    """
+
+    names: tuple[str, ...]
+    slices: dict[str, slice]
+    lo: np.ndarray
+    hi: np.ndarray
+    null: np.ndarray
+    start: np.ndarray
+
+    @property
+    def num_params(self) -> int:
+        return int(self.lo.size)
+
+    @property
+    def max_pair_params(self) -> int:
+        """Most effect parameters a candidate may free at once (a pair of the largest two)."""
+        sizes = sorted((s.stop - s.start for s in self.slices.values()), reverse=True)
+        return int(sum(sizes[:2]))
+
+
+def effect_space(names: Sequence[str] | None = None) -> EffectSpace:
+    """`EffectSpace` of `names` (default: every registered effect), read from the registry."""
+    names = effect_names() if names is None else tuple(names)
+    classes = [EFFECTS[n] for n in names]
+    stops = np.cumsum([len(c.param_names) for c in classes]).astype(int)
+    slices = {n: slice(int(b - len(c.param_names)), int(b)) for n, c, b in zip(names, classes, stops)}
+    flat = lambda attr: np.array([x for c in classes for x in attr(c)], dtype=float)
+    return EffectSpace(
+        names=names,
+        slices=slices,
+        lo=flat(lambda c: [b[0] for b in c.bounds]),
+        hi=flat(lambda c: [b[1] for b in c.bounds]),
+        null=flat(lambda c: c.null),
+        start=flat(lambda c: c.start),
+    )
+
 
 #: Effects whose signatures can look alike on a recording; each group is checked for
 #: separability. "cornering_stiffness" stands for a change of θ's C_alpha_f, C_alpha_r.
@@ -16,21 +77,22 @@ LOOKALIKE_GROUPS: tuple[tuple[str, ...], ...] = (
 )
 
 
-def single_candidates() -> list[tuple[str, ...]]:
-    """The ten effects, one at a time."""
-    return [(e,) for e in EFFECT_NAMES]
+def single_candidates(names: Sequence[str] | None = None) -> list[tuple[str, ...]]:
+    """The effects `names` (default: every registered effect), one at a time."""
+    return [(e,) for e in (effect_names() if names is None else names)]
 
 
 def pair_candidates(ranked_singles: Sequence[str], top: int = 3) -> list[tuple[str, ...]]:
-    """Pairs among the `top` best-ranked singles (all 45 pairs cost too much to fit; a pair
-    whose members both add nothing alone is rarely the answer, and the pairs that are
-    skipped are listed in the report)."""
+    """Pairs among the `top` best-ranked singles, each in registry order (all pairs cost too
+    much to fit; a pair whose members both add nothing alone is rarely the answer, and the
+    pairs that are skipped are listed in the report)."""
+    order = effect_names()
     best = list(ranked_singles)[:top]
-    return [tuple(sorted(p, key=EFFECT_NAMES.index)) for p in itertools.combinations(best, 2)]
+    return [tuple(sorted(p, key=order.index)) for p in itertools.combinations(best, 2)]
 
 
-def all_pairs() -> list[tuple[str, ...]]:
-    return list(itertools.combinations(EFFECT_NAMES, 2))
+def all_pairs(names: Sequence[str] | None = None) -> list[tuple[str, ...]]:
+    return list(itertools.combinations(effect_names() if names is None else names, 2))
 
 
 def label(effects: Sequence[str]) -> str:

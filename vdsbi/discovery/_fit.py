@@ -1,17 +1,21 @@
-"""Differentiable MAP fit of θ, initial speeds and effect parameters (Levenberg–Marquardt).
+"""Differentiable MAP fit of θ, initial speeds and effect parameters.
 
-One *super-model* with all ten effects enabled is compiled once; a candidate explanation is a
-runtime mask saying which effects are active (inactive effects sit exactly at their null
-values), so fitting any of the 55 candidates reuses one compiled Jacobian kernel.
+One *super-model* with every registered effect enabled is compiled once per `Fitter`; a
+candidate explanation is a runtime mask saying which effects are active (inactive effects sit
+exactly at their null values), so fitting any candidate reuses one compiled kernel. The
+effects, their fit bounds and starting values are read from the registry
+(`vdsbi.simulator.EFFECTS`, each effect's `bounds` and `start`) when a `Fitter` is built, so
+an effect added with `register_effect` is searched like a built-in one.
 
-The Jacobian is forward-mode (`jax.linearize` + `vmap` over a fixed-width tangent basis).
-`vdsbi.simulator.solve` steps with diffrax's RK4, whose step uses a custom-VJP loop and so
-cannot be pushed through `jacfwd`; `rk4_readings` below is the same fixed-step classical RK4
-on the same vector field and sensor map (it agrees with `solve` to ~1e-12 in float64).
+The readings are `vdsbi.simulator.solve`'s fixed-step RK4 (plain jnp in `lax.scan`, so
+forward-mode differentiable); the fit is `vdsbi.diagnostics.levenberg_marquardt` with a
+forward-mode Jacobian over a fixed-width vector of free parameters (the candidate's free
+entries of z, padded), one compilation for all candidates.
 
 Parameters live in an unbounded space z: θ = lo + (hi − lo)·sigmoid(z) inside the vehicle's
-prior box, effect parameters likewise inside `EFFECT_BOUNDS`, initial speeds v0 = v0_meas + z
-(m/s). A weak Gaussian N(0, 3²) on z (N(0, 1 m/s) on v0) regularises flat directions.
+prior box, effect parameters likewise inside their effect's `bounds`, initial speeds
+v0 = v0_meas + z (m/s). A weak Gaussian N(0, 3²) on z (N(0, 1 m/s) on v0) regularises flat
+directions.
 
 Noise model: additive white Gaussian sensor noise, independent per channel with std σ_c.
 """
@@ -26,93 +30,32 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..simulator import EFFECTS, PARAM_NAMES, Args, Inputs, Vehicle, VehicleModel, make_model
-from ..simulator._vehicle import CHANNELS
+from ..diagnostics import laplace_covariance, levenberg_marquardt, logit
+from ..simulator import (
+    CHANNELS,
+    EFFECTS,
+    PARAM_NAMES,
+    Inputs,
+    Solver,
+    Vehicle,
+    VehicleModel,
+    make_model,
+    solve,
+)
+from ._candidates import EffectSpace, effect_space
 
-
-def super_model(vehicle: Vehicle) -> VehicleModel:
-    """All candidate effects, in registry order. At their null values they vanish exactly
-    (the lags' states are frozen and bypassed at τ = 0, so nothing stiff remains and a 5 ms
-    RK4 step is stable; τ is bounded below by 5 ms when fitted: |λ|·h ≤ 1.2)."""
-    return make_model(vehicle, EFFECT_NAMES)
-
-
-#: Fitting bounds per effect parameter (wider than the effect's `typical` range so an
-#: estimate is not pinned by the bound; physical sign constraints where they exist).
-EFFECT_BOUNDS: dict[str, tuple[tuple[float, float], ...]] = {
-    "aero_drag": ((0.0, 2.5),),
-    "rolling_resistance": ((0.0, 0.08),),
-    "road_grade": ((-0.15, 0.15),),
-    "road_bank": ((-0.15, 0.15),),
-    "steering_lag": ((0.005, 0.8),),
-    "torque_lag": ((0.005, 1.2),),
-    "imu_lever_arm": ((-2.5, 2.5), (-1.0, 1.0)),
-    "imu_misalignment": ((-0.15, 0.15), (-0.15, 0.15)),
-    "sensor_bias": ((-2.0, 2.0), (-2.0, 2.0), (-0.08, 0.08)),
-    "wheel_radius_error": ((-0.15, 0.15),),
-}
-#: Starting value of each effect parameter when its effect is switched on (inside the bounds).
-EFFECT_START: dict[str, tuple[float, ...]] = {
-    "aero_drag": (0.3,),
-    "rolling_resistance": (0.004,),
-    "road_grade": (0.0,),
-    "road_bank": (0.0,),
-    "steering_lag": (0.04,),
-    "torque_lag": (0.05,),
-    "imu_lever_arm": (0.0, 0.0),
-    "imu_misalignment": (0.0, 0.0),
-    "sensor_bias": (0.0, 0.0, 0.0),
-    "wheel_radius_error": (0.0,),
-}
-#: Candidate effects (registered effects without fitting bounds here are not searched).
-EFFECT_NAMES: tuple[str, ...] = tuple(n for n in EFFECTS if n in EFFECT_BOUNDS)
-_SIZES = [len(EFFECTS[n].param_names) for n in EFFECT_NAMES]
-_OFFSETS = np.concatenate([[0], np.cumsum(_SIZES)]).astype(int)
-#: Slice of each effect's parameters in the flat effect-parameter vector.
-EFFECT_SLICES: dict[str, slice] = {
-    n: slice(int(_OFFSETS[i]), int(_OFFSETS[i + 1])) for i, n in enumerate(EFFECT_NAMES)
-}
-NUM_EFFECT_PARAMS = int(_OFFSETS[-1])
-#: Most effect parameters a candidate may free at once (a pair: sensor_bias + a 2-param effect).
-MAX_EFFECT_PARAMS = 5
 #: Prior std of z (θ and effect parameters) and of the initial speed, m/s.
 Z_PRIOR_STD = 3.0
 V0_PRIOR_STD = 1.0
+#: Largest step of one z coordinate in one iteration (a sigmoid saturates past |z| ≈ 5).
+MAX_Z_STEP = 2.0
 
 
-def _effect_arrays():
-    lo = np.concatenate([[b[0] for b in EFFECT_BOUNDS[n]] for n in EFFECT_NAMES])
-    hi = np.concatenate([[b[1] for b in EFFECT_BOUNDS[n]] for n in EFFECT_NAMES])
-    null = np.concatenate([EFFECTS[n].null for n in EFFECT_NAMES]).astype(float)
-    start = np.concatenate([EFFECT_START[n] for n in EFFECT_NAMES]).astype(float)
-    return lo, hi, null, start
-
-
-def _logit(x):
-    x = np.clip(x, 1e-9, 1 - 1e-9)
-    return np.log(x) - np.log1p(-x)
-
-
-def rk4_readings(model, theta, inputs: Inputs, v0, effect_params, dt: float = 0.0025):
-    """Noise-free (T, 6) readings by classical RK4, forward-differentiable (see module doc)."""
-    args = Args(theta=theta, effect_params=effect_params, inputs=inputs)
-    y0 = model.initial_state(theta, effect_params, inputs, v0)
-    sub = max(1, round(inputs.dt / dt))
-    h = inputs.dt / sub
-    f = lambda t, y: model.vector_field(t, y, args)
-
-    def interval(y, k):
-        for j in range(sub):
-            t0 = inputs.t0 + k * inputs.dt + j * h
-            k1 = f(t0, y)
-            k2 = f(t0 + h / 2, y + h / 2 * k1)
-            k3 = f(t0 + h / 2, y + h / 2 * k2)
-            k4 = f(t0 + h, y + h * k3)
-            y = y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        return y, model.sensors(inputs.t0 + (k + 1) * inputs.dt, y, args)
-
-    _, ys = jax.lax.scan(interval, y0, jnp.arange(inputs.num_samples - 1))
-    return jnp.concatenate([model.sensors(inputs.t0, y0, args)[None], ys])
+def super_model(vehicle: Vehicle, effects: EffectSpace) -> VehicleModel:
+    """All candidate effects, in registry order. At their null values they vanish exactly
+    (the lags' states are frozen and bypassed at τ = 0, so nothing stiff remains and a 5 ms
+    RK4 step is stable; τ is bounded below by 5 ms when fitted: |λ|·h ≤ 1.2)."""
+    return make_model(vehicle, effects.names)
 
 
 class FitData(eqx.Module):
@@ -142,13 +85,14 @@ class FitData(eqx.Module):
 
 
 class Space(eqx.Module):
-    """Maps the unbounded vector z = [z_θ (6), z_v0 (W), z_effects (16)] to physical values."""
+    """Maps the unbounded vector z = [z_θ (6), z_v0 (W), z_effects (E)] to physical values."""
 
     theta_lo: jax.Array
     theta_hi: jax.Array
     eff_lo: jax.Array
     eff_hi: jax.Array
     eff_null: jax.Array
+    eff_bounds: tuple[tuple[int, int], ...] = eqx.field(static=True)
 
     def split(self, z, num_windows):
         return z[:6], z[6 : 6 + num_windows], z[6 + num_windows :]
@@ -156,64 +100,63 @@ class Space(eqx.Module):
     def theta(self, z_theta):
         return self.theta_lo + (self.theta_hi - self.theta_lo) * jax.nn.sigmoid(z_theta)
 
-    def effects(self, z_eff, active):
+    def effects(self, z_eff, active) -> tuple[jax.Array, ...]:
+        """One parameter vector per effect; inactive ones at their null values."""
         val = self.eff_lo + (self.eff_hi - self.eff_lo) * jax.nn.sigmoid(z_eff)
-        return jnp.where(active, val, self.eff_null)
+        flat = jnp.where(active, val, self.eff_null)
+        return tuple(flat[a:b] for a, b in self.eff_bounds)
 
 
-def make_space(vehicle: Vehicle) -> Space:
+def make_space(vehicle: Vehicle, effects: EffectSpace) -> Space:
     prior = vehicle.default_prior()
-    lo, hi, null, _ = _effect_arrays()
     return Space(
         theta_lo=jnp.array([prior[n][0] for n in PARAM_NAMES]),
         theta_hi=jnp.array([prior[n][1] for n in PARAM_NAMES]),
-        eff_lo=jnp.asarray(lo),
-        eff_hi=jnp.asarray(hi),
-        eff_null=jnp.asarray(null),
+        eff_lo=jnp.asarray(effects.lo),
+        eff_hi=jnp.asarray(effects.hi),
+        eff_null=jnp.asarray(effects.null),
+        eff_bounds=tuple((s.start, s.stop) for s in effects.slices.values()),
     )
 
 
-def _split_effects(flat):
-    return tuple(flat[EFFECT_SLICES[n]] for n in EFFECT_NAMES)
-
-
-def _predict(model, space, data: FitData, z, active, dt):
+def _predict(model, space, data: FitData, z, active, solver):
     """(W, T, 6) readings for every window."""
     zt, zv, ze = space.split(z, data.num_windows)
     theta = space.theta(zt)
-    ep = _split_effects(space.effects(ze, active))
-    v0 = data.v0_meas + zv
+    ep = space.effects(ze, active)
 
-    def one(inp, v):
-        return rk4_readings(model, theta, inp, v, ep, dt)
+    def one(inputs, v0):
+        return solve(model, theta, inputs, v0, ep, solver)[0]
 
-    return jax.vmap(one)(data.inputs, v0)
+    return jax.vmap(one)(data.inputs, data.v0_meas + zv)
 
 
-def _whitened(model, space, data, z, active, dt):
-    y = _predict(model, space, data, z, active, dt)[:, :, list(data.channel_index)]
+def _whitened(model, space, data, z, active, solver):
+    y = _predict(model, space, data, z, active, solver)[:, :, list(data.channel_index)]
     r = (y - data.measured) / data.sigma
     r = jnp.where(data.mask[:, :, None] > 0, r, 0.0)
     return r.reshape(-1)
 
 
 @eqx.filter_jit
-def _residual(model, space, data, z, active, dt):
-    return _whitened(model, space, data, z, active, dt)
+def _residual(model, space, data, z, active, solver):
+    return _whitened(model, space, data, z, active, solver)
 
 
 @eqx.filter_jit
-def _residual_and_jacobian(model, space, data, z, active, basis, dt):
-    """Whitened residual (N,) and its Jacobian along the columns of `basis` (P, K) -> (N, K)."""
-    fn = lambda zz: _whitened(model, space, data, zz, active, dt)
-    r, lin = jax.linearize(fn, z)
-    jac = jax.vmap(lin, in_axes=1, out_axes=1)(basis)
-    return r, jac
+def _predict_jit(model, space, data, z, active, solver):
+    return _predict(model, space, data, z, active, solver)
 
 
 @eqx.filter_jit
-def _predict_jit(model, space, data, z, active, dt):
-    return _predict(model, space, data, z, active, dt)
+def _fit_free(model, space, data, z, active, free, prec, max_iter, tol, solver):
+    """Levenberg–Marquardt over the entries `free` of z (padded with an out-of-range index,
+    whose slots nothing reads: their prior keeps them at 0)."""
+    fn = lambda y: _whitened(model, space, data, z.at[free].set(y, mode="drop"), active, solver)
+    y0 = jnp.where(free < z.size, z[jnp.minimum(free, z.size - 1)], 0.0)
+    return levenberg_marquardt(
+        fn, y0, prior_precision=prec, max_steps=max_iter, rtol=tol, max_step=MAX_Z_STEP
+    )
 
 
 @dataclasses.dataclass
@@ -267,21 +210,25 @@ class Fitter:
         data: the windows to fit.
         dt: RK4 step, s (5 ms for the search, the simulator's default 2.5 ms for the test
             and the final fit).
+        effects: the candidate effects (default: every registered effect, read now).
     """
 
-    def __init__(self, vehicle: Vehicle, data: FitData, dt: float = 0.0025):
+    def __init__(
+        self, vehicle: Vehicle, data: FitData, dt: float = 0.0025, effects: EffectSpace | None = None
+    ):
         self.vehicle = vehicle
-        self.model = super_model(vehicle)
-        self.space = make_space(vehicle)
+        self.effects = effect_space() if effects is None else effects
+        self.model = super_model(vehicle, self.effects)
+        self.space = make_space(vehicle, self.effects)
         self.data = data
         self.dt = float(dt)
+        self.solver = Solver(dt=self.dt)
         w = data.num_windows
-        self.num_params = 6 + w + NUM_EFFECT_PARAMS
-        self.width = 6 + w + MAX_EFFECT_PARAMS
+        self.num_params = 6 + w + self.effects.num_params
+        self.width = 6 + w + self.effects.max_pair_params
         self.num_residuals = int(np.asarray(data.mask).sum()) * len(data.channels)
-        _, _, _, start = _effect_arrays()
-        lo, hi = np.asarray(self.space.eff_lo), np.asarray(self.space.eff_hi)
-        self._z_eff_start = _logit((start - lo) / (hi - lo))
+        e = self.effects
+        self._z_eff_start = logit((e.start - e.lo) / (e.hi - e.lo))
 
     def initial_z(self, theta0: np.ndarray | None = None) -> np.ndarray:
         prior = self.vehicle.default_prior()
@@ -290,13 +237,18 @@ class Fitter:
             theta0 = np.array([np.sqrt(prior[n][0] * prior[n][1]) for n in PARAM_NAMES])
             theta0[0] = 0.5 * (prior["l_f"][0] + prior["l_f"][1])
         lo, hi = np.asarray(self.space.theta_lo), np.asarray(self.space.theta_hi)
-        zt = _logit((np.asarray(theta0) - lo) / (hi - lo))
+        zt = logit((np.asarray(theta0) - lo) / (hi - lo))
         return np.concatenate([zt, np.zeros(self.data.num_windows), self._z_eff_start])
 
+    def _effect_index(self, effect: str) -> np.ndarray:
+        """Indices in z of an effect's parameters."""
+        s = self.effects.slices[effect]
+        return 6 + self.data.num_windows + np.arange(s.start, s.stop)
+
     def active_mask(self, effects: Sequence[str]) -> np.ndarray:
-        act = np.zeros(NUM_EFFECT_PARAMS, dtype=bool)
+        act = np.zeros(self.effects.num_params, dtype=bool)
         for e in effects:
-            act[EFFECT_SLICES[e]] = True
+            act[self.effects.slices[e]] = True
         return act
 
     def free_index(self, effects: Sequence[str], fix_theta: bool = False) -> np.ndarray:
@@ -304,8 +256,7 @@ class Fitter:
         idx = [] if fix_theta else list(range(6))
         idx += list(range(6, 6 + w))
         for e in effects:
-            s = EFFECT_SLICES[e]
-            idx += list(range(6 + w + s.start, 6 + w + s.stop))
+            idx += self._effect_index(e).tolist()
         return np.asarray(idx, dtype=int)
 
     def _prior_prec(self) -> np.ndarray:
@@ -317,25 +268,13 @@ class Fitter:
     def residual(self, z, effects: Sequence[str], data: FitData | None = None) -> np.ndarray:
         act = jnp.asarray(self.active_mask(effects))
         d = self.data if data is None else data
-        return np.asarray(_residual(self.model, self.space, d, jnp.asarray(z), act, self.dt))
+        return np.asarray(_residual(self.model, self.space, d, jnp.asarray(z), act, self.solver))
 
     def predict(self, z, effects: Sequence[str], data: FitData | None = None) -> np.ndarray:
         """(W, T, 6) noise-free readings on `data` (default: the fitted windows)."""
         act = jnp.asarray(self.active_mask(effects))
         d = self.data if data is None else data
-        return np.asarray(_predict_jit(self.model, self.space, d, jnp.asarray(z), act, self.dt))
-
-    def linearize(self, z, effects: Sequence[str], free: np.ndarray):
-        """Residual (N,) and Jacobian (N, len(free)) at z."""
-        if len(free) > self.width:
-            raise ValueError(f"fit: {len(free)} free parameters exceed the kernel width {self.width}")
-        basis = np.zeros((self.num_params, self.width))
-        basis[free, np.arange(len(free))] = 1.0
-        act = jnp.asarray(self.active_mask(effects))
-        r, jac = _residual_and_jacobian(
-            self.model, self.space, self.data, jnp.asarray(z), act, jnp.asarray(basis), self.dt
-        )
-        return np.asarray(r), np.asarray(jac)[:, : len(free)]
+        return np.asarray(_predict_jit(self.model, self.space, d, jnp.asarray(z), act, self.solver))
 
     def fit(
         self,
@@ -346,59 +285,42 @@ class Fitter:
         tol: float = 1e-6,
         fix_theta: bool = False,
     ) -> FitResult:
-        """Levenberg–Marquardt on ½|r|² + ½ Σ prec·z² over the free parameters.
+        """MAP fit: `levenberg_marquardt` on ½|r|² + ½ Σ prec·z² over the free parameters.
 
         `z0` warm-starts (e.g. from the base fit); entries of newly activated effects are
         reset to their starting values.
         """
         effects = tuple(effects)
         z = self.initial_z() if z0 is None else np.array(z0, dtype=float)
-        w = self.data.num_windows
         for e in effects:
-            s = EFFECT_SLICES[e]
-            if z0 is None or not np.isfinite(z[6 + w + s.start : 6 + w + s.stop]).all():
-                z[6 + w + s.start : 6 + w + s.stop] = self._z_eff_start[s]
+            i = self._effect_index(e)
+            if z0 is None or not np.isfinite(z[i]).all():
+                z[i] = self._z_eff_start[self.effects.slices[e]]
         free = self.free_index(effects, fix_theta)
-        prec = self._prior_prec()[free]
-        centre = np.zeros(len(free))
-
-        def cost_of(r, zf):
-            if not np.all(np.isfinite(r)):
-                return np.inf
-            return 0.5 * float(r @ r) + 0.5 * float(np.sum(prec * (zf - centre) ** 2))
-
-        r, jac = self.linearize(z, effects, free)
-        cost = cost_of(r, z[free])
-        lam = 1e-3
-        converged = False
-        it = 0
-        while it < max_iter:
-            it += 1
-            g = jac.T @ r + prec * (z[free] - centre)
-            h = jac.T @ jac + np.diag(prec)
-            improved = False
-            for _ in range(8):
-                step = -np.linalg.solve(h + lam * np.diag(np.diag(h) + 1e-9), g)
-                step = np.clip(step, -2.0, 2.0)
-                z_new = z.copy()
-                z_new[free] += step
-                r_new = self.residual(z_new, effects)
-                c_new = cost_of(r_new, z_new[free])
-                if c_new < cost:
-                    improved = True
-                    break
-                lam *= 5.0
-            if not improved:
-                converged = True
-                break
-            rel = (cost - c_new) / max(cost, 1e-12)
-            z, cost = z_new, c_new
-            lam = max(lam / 4.0, 1e-7)
-            r, jac = self.linearize(z, effects, free)
-            if rel < tol:
-                converged = True
-                break
-        return self._result(effects, z, r, jac, free, prec, it, converged)
+        k = len(free)
+        if k > self.width:
+            raise ValueError(f"fit: {k} free parameters exceed the kernel width {self.width}")
+        # Fixed width (padding indices point past z and are dropped): one compiled kernel.
+        index = np.full(self.width, self.num_params)
+        index[:k] = free
+        prec = np.ones(self.width)
+        prec[:k] = self._prior_prec()[free]
+        act = jnp.asarray(self.active_mask(effects))
+        sol = _fit_free(
+            self.model,
+            self.space,
+            self.data,
+            jnp.asarray(z),
+            act,
+            jnp.asarray(index),
+            jnp.asarray(prec),
+            jnp.asarray(max_iter),
+            jnp.asarray(tol, dtype=z.dtype),
+            self.solver,
+        )
+        z[free] = np.asarray(sol.z)[:k]
+        r, jac = np.asarray(sol.residual), np.asarray(sol.jacobian)[:, :k]
+        return self._result(effects, z, r, jac, free, prec[:k], int(sol.num_steps), bool(sol.converged))
 
     def _result(self, effects, z, r, jac, free, prec, iterations, converged) -> FitResult:
         w = self.data.num_windows
@@ -407,7 +329,7 @@ class Fitter:
         dof = max(1, self.num_residuals - k)
         # Laplace covariance in z; inflated by χ²/dof when > 1 (noise under-stated or model
         # misspecified: the usual quasi-likelihood correction).
-        cov_z = np.linalg.pinv(jac.T @ jac + np.diag(prec)) * max(1.0, chi2 / dof)
+        cov_z = np.asarray(laplace_covariance(jnp.asarray(jac), jnp.asarray(prec))) * max(1.0, chi2 / dof)
         sd_free = np.sqrt(np.clip(np.diag(cov_z), 0, None))
         sd_z = np.zeros(self.num_params)
         sd_z[free] = sd_free
@@ -416,12 +338,12 @@ class Fitter:
         tlo, thi = np.asarray(self.space.theta_lo), np.asarray(self.space.theta_hi)
         theta = tlo + (thi - tlo) * sig(zt)
         theta_std = (thi - tlo) * sig(zt) * (1 - sig(zt)) * sd_z[:6]
-        elo, ehi = np.asarray(self.space.eff_lo), np.asarray(self.space.eff_hi)
+        elo, ehi = self.effects.lo, self.effects.hi
         eval_ = elo + (ehi - elo) * sig(ze)
         esd = (ehi - elo) * sig(ze) * (1 - sig(ze)) * sd_z[6 + w :]
         params, stds = {}, {}
         for e in effects:
-            s = EFFECT_SLICES[e]
+            s = self.effects.slices[e]
             names = EFFECTS[e].param_names
             params[e] = {n: float(v) for n, v in zip(names, eval_[s])}
             stds[e] = {n: float(v) for n, v in zip(names, esd[s])}

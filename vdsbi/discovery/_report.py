@@ -3,13 +3,226 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..simulator._vehicle import CHANNELS
+from ..diagnostics import Localisation, MisspecificationTest
+from ..simulator import CHANNELS, EFFECTS, PARAM_NAMES
+from ._candidates import all_pairs, label
+from ._data import Windows
+from ._fit import FitResult, Fitter
+from ._rank import PAIR_LOG_PRIOR, STRONG, Ranked
+
+if TYPE_CHECKING:  # annotations only (_diagnose imports this module)
+    from ..io import Recording
+    from ._diagnose import DiagnoseSettings, DiagnosisResult
 
 REQUIRED_KEYS = ("mismatch_detected", "p_value", "located", "effects", "chosen", "fit", "theta")
+
+
+def _held_metrics(pred: np.ndarray, windows: Windows) -> dict:
+    """Per channel on the held-out samples: NRMSE (RMS error / std of the measurement) and
+    χ²/dof (mean squared whitened error; no parameters were fitted on these samples)."""
+    out = {}
+    m = windows.held
+    for c, name in enumerate(windows.channels):
+        e = (pred[:, :, CHANNELS.index(name)] - windows.y[:, :, c])[m]
+        y = windows.y[:, :, c][m]
+        out[name] = {
+            "nrmse": float(np.sqrt(np.mean(e**2)) / (np.std(y) + 1e-12)),
+            "chi2_dof": float(np.mean((e / windows.sigma[c]) ** 2)),
+        }
+    return out
+
+
+def _effect_rows(ranked: Sequence[Ranked]) -> list[dict]:
+    return [
+        {
+            "name": r.name,
+            "effects": list(r.effects),
+            "score": r.score,
+            "log_bayes_factor": r.log_bayes_factor,
+            "probability": r.probability,
+            "chi2": r.chi2,
+            "num_params": r.num_effect_params,
+            "params": r.fit.effect_params,
+            "params_std": r.fit.effect_std,
+        }
+        for r in ranked
+    ]
+
+
+def _at_bounds(fit: FitResult, fitter: Fitter, frac: float = 0.01) -> list[str]:
+    """Names of fitted values within `frac` of their box's edge (the data pushed them there:
+    a sign that they absorb something the model lacks)."""
+    out = []
+    lo, hi = np.asarray(fitter.space.theta_lo), np.asarray(fitter.space.theta_hi)
+    for n, v, a, b in zip(PARAM_NAMES, fit.theta, lo, hi):
+        if min(v - a, b - v) < frac * (b - a):
+            out.append(n)
+    for e, d in fit.effect_params.items():
+        for (k, v), (a, b) in zip(d.items(), EFFECTS[e].bounds):
+            if min(v - a, b - v) < frac * (b - a):
+                out.append(f"{e}.{k}")
+    return out
+
+
+def verdict(detected: bool, chosen: Sequence[str], p_after: float, alpha: float, held_improved) -> dict:
+    """One-line conclusion, and whether the chosen effects account for the whole mismatch.
+
+    `explained` needs both a residual consistent with noise after the fix (p_after ≥ α) and a
+    better held-out fit; otherwise physics outside the library remains (or the fix is absorbing
+    it), and the report says so instead of claiming the effect as the answer.
+    """
+    if not detected:
+        return {"explained": None, "text": "no mismatch detected: the base model fits within the noise"}
+    if not chosen:
+        return {
+            "explained": False,
+            "text": "mismatch detected, but no candidate effect has strong evidence: the missing "
+            "physics is outside the library (see where it is located)",
+        }
+    names = " + ".join(chosen)
+    if held_improved is False:
+        return {
+            "explained": False,
+            "text": f"mismatch detected; {names} fits the fitted part but not the held-out part: "
+            "it is absorbing physics outside the library, not naming it",
+        }
+    if p_after < alpha / 10:
+        return {
+            "explained": False,
+            "text": f"mismatch detected; {names} explains part of it (p after the fix = {p_after:.3g} < "
+            f"{alpha / 10:g}): physics outside the library remains",
+        }
+    if p_after < alpha:
+        # at level α, one complete fix in 1/α still rejects by chance: say so, do not overclaim
+        return {
+            "explained": False,
+            "text": f"mismatch detected; {names} explains most of it, but the residual test still "
+            f"rejects weakly (p after the fix = {p_after:.3g} < {alpha:g}; about 1 in {1 / alpha:.0f} "
+            "complete fixes does so by chance): something small may remain",
+        }
+    return {"explained": True, "text": f"mismatch detected and explained by {names}"}
+
+
+def _theta_dict(x) -> dict:
+    return {n: float(v) for n, v in zip(PARAM_NAMES, x)}
+
+
+def build_report(
+    found: DiagnosisResult,
+    recording: Recording,
+    s: DiagnoseSettings,
+    names: tuple[str, ...],
+    chosen: tuple[str, ...],
+    pairs: list[tuple[str, ...]],
+    sep: list[dict],
+    fitter: Fitter,
+    coarse: Fitter,
+) -> dict:
+    """report.json's content (without "seconds")."""
+    windows, base, final, ranked = found.windows, found.base, found.final, found.ranked
+    p_after = float(found.test_after.p_value)
+    detected = bool(found.test_before.p_value < s.alpha)
+    fit_before = _held_metrics(found.predictions["before"], windows)
+    fit_after = _held_metrics(found.predictions["after"], windows)
+    chi_b = float(np.mean([v["chi2_dof"] for v in fit_before.values()]))
+    chi_a = float(np.mean([v["chi2_dof"] for v in fit_after.values()]))
+    held_improved = bool(chi_a < chi_b) if chosen else None
+    concl = verdict(detected, chosen, p_after, s.alpha, held_improved)
+    return {
+        "source": str(recording.source),
+        "mismatch_detected": detected,
+        "p_value": float(found.test_before.p_value),
+        "alpha": s.alpha,
+        "p_value_after": p_after,
+        "located": _located(found.localisation, found.test_before, windows),
+        "effects": _effect_rows(ranked),
+        "chosen": list(chosen),
+        "ranking_confidence": _confidence(ranked),
+        "separability": sep,
+        "pairs_fitted": [label(p) for p in pairs],
+        "pairs_skipped": _pairs_skipped(s, names, pairs),
+        "fit": {"before": fit_before, "after": fit_after},
+        # Validation: does the chosen fix also improve the held-out part (mean χ²/dof over
+        # channels)? If not, the effect is absorbing some other mismatch on the fitted part.
+        "held_out_improved": held_improved,
+        "explained": concl["explained"],
+        "verdict": concl["text"],
+        "fit_train_chi2_dof": {"before": base.chi2_dof, "after": final.chi2_dof},
+        "theta": {"before": _theta_dict(base.theta), "after": _theta_dict(final.theta)},
+        "theta_std": {"before": _theta_dict(base.theta_std), "after": _theta_dict(final.theta_std)},
+        "v0": {"before": base.v0.tolist(), "after": final.v0.tolist()},
+        "at_bounds": _at_bounds(final, fitter),
+        "effect_params": final.effect_params,
+        "effect_params_std": final.effect_std,
+        "noise": {
+            "model": "additive white Gaussian per channel",
+            "sigma": {c: float(x) for c, x in zip(windows.channels, windows.sigma)},
+            "source": windows.sigma_source,
+        },
+        "windows": _window_spans(windows, s.train_fraction),
+        "channels": list(windows.channels),
+        "recording_warnings": list(recording.warnings),
+        "method": _method(s, coarse, fitter),
+    }
+
+
+def _confidence(ranked: Sequence[Ranked]) -> dict:
+    top, second = ranked[0], (ranked[1] if len(ranked) > 1 else None)
+    return {
+        "top": top.name,
+        "probability": top.probability,
+        "log_evidence_gap_to_next": float(top.score - second.score) if second else None,
+        "next": second.name if second else None,
+    }
+
+
+def _pairs_skipped(s: DiagnoseSettings, names: Sequence[str], pairs: Sequence[tuple[str, ...]]) -> str:
+    n = len(all_pairs())
+    text = f"pairs not among the top {s.top_pairs} single effects ({n - len(pairs)} of {n}) were not fitted"
+    return text + ("" if s.candidates is None else f"; only {sorted(names)} were considered")
+
+
+def _located(loc: Localisation, test: MisspecificationTest, windows: Windows) -> dict:
+    return {
+        "channels": loc.channels,
+        "windows": loc.windows,
+        "bands_hz": loc.bands_hz,
+        "channel_scores": loc.channel_scores,
+        "whiteness_p": loc.whiteness,
+        "input_xcorr": loc.xcorr,
+        "band_power_ratio": {
+            c: {f"{b[0]:g}-{b[1]:g}": float(test.band_power_ratio[i, j]) for j, b in enumerate(test.bands_hz)}
+            for i, c in enumerate(windows.channels)
+        },
+    }
+
+
+def _window_spans(windows: Windows, train_fraction: float) -> dict:
+    return {
+        "spans_s": [
+            [float(windows.t[w, 0]), float(windows.t[w][windows.valid[w]][-1])]
+            for w in range(windows.num_windows)
+        ],
+        "held_out_from_s": windows.t_train_end.tolist(),
+        "train_fraction": train_fraction,
+    }
+
+
+def _method(s: DiagnoseSettings, coarse: Fitter, fitter: Fitter) -> dict:
+    return {
+        "identification": "MAP (Levenberg–Marquardt, forward-mode Jacobian, float64) + Laplace covariance",
+        "test": "max standardised low-band/high-band residual power ratio; null by simulated noise "
+        f"through the linearised refit ({s.num_draws} draws)",
+        "evidence": "score = BIC log Bayes factor vs 'none' + log prior odds (pairs "
+        f"{PAIR_LOG_PRIOR:g}); strong if > {STRONG:g}",
+        "solver_dt_s": {"search": coarse.dt, "final": fitter.dt},
+    }
 
 
 def _json_default(o):
