@@ -93,6 +93,13 @@ class VehicleModel(eqx.Module):
             i += e.num_states
         return out
 
+    def friction(self, effect_params) -> Float[Array, ""]:
+        """Road friction μ: vehicle.json's value times the effects' friction factors."""
+        scale = jnp.asarray(1.0)
+        for e, p in zip(self.effects, effect_params):
+            scale = scale * e.friction_scale(p)
+        return self.vehicle.friction * scale
+
     def radius(self, effect_params) -> Float[Array, ""]:
         scale = jnp.asarray(1.0)
         for e, p in zip(self.effects, effect_params):
@@ -176,7 +183,7 @@ class VehicleModel(eqx.Module):
             return self._evaluate_speed(t, y, args)
         theta, effect_params, inputs = args
         veh = self.vehicle
-        m, L, mu = veh.mass, veh.wheelbase, veh.friction
+        m, L, mu = veh.mass, veh.wheelbase, self.friction(effect_params)
         vx, vy, r, wf, wr, a_f_hat, a_r_hat, k_f_hat, k_r_hat = (y[i] for i in range(9))
         zs = self._effect_states(y)
         u_cmd = inputs(t)
@@ -297,7 +304,7 @@ class VehicleModel(eqx.Module):
         # Speed mode (see the class docstring): Vx and a_x are measured, κ = 0, no wheel torques.
         theta, effect_params, inputs = args
         veh = self.vehicle
-        m, L, mu = veh.mass, veh.wheelbase, veh.friction
+        m, L, mu = veh.mass, veh.wheelbase, self.friction(effect_params)
         vy, r, a_f_hat, a_r_hat = y[1], y[2], y[5], y[6]
         vx, dvx, a_x = inputs.longitudinal(t)
         zs = self._effect_states(y)

@@ -10,6 +10,7 @@ from ._rolling_resistance import RollingResistance as RollingResistance
 from ._sensor_bias import SensorBias as SensorBias
 from ._steering_lag import SteeringLag as SteeringLag
 from ._torque_lag import TorqueLag as TorqueLag
+from ._tyre_friction import TyreFriction as TyreFriction
 from ._wheel_radius_error import WheelRadiusError as WheelRadiusError
 
 #: Registry: name -> effect class, in search order. Filled by `register_effect` below; read
@@ -66,5 +67,6 @@ for _cls in (
     ImuMisalignment,
     SensorBias,
     WheelRadiusError,
+    TyreFriction,
 ):
     register_effect(_cls)

@@ -65,6 +65,10 @@ class AbstractEffect(eqx.Module):
         """Effective (steer, torque_front, torque_rear) acting on the vehicle."""
         return u
 
+    def friction_scale(self, p) -> Float[Array, ""]:
+        """Factor on the road friction coefficient μ."""
+        return jnp.asarray(1.0)
+
     def radius_scale(self, p) -> Float[Array, ""]:
         """Factor on the free tire radius."""
         return jnp.asarray(1.0)

@@ -1,0 +1,49 @@
+"""The tyre-friction effect: the lateral limit scales with μ·s, and below half of it nothing changes."""
+
+import numpy as np
+import pytest
+
+from vdsbi.simulator import SEED_TRUE_THETA, Inputs, default_vehicle, simulate, theta_from_dict
+
+
+def _ramp_steer(max_steer: float, duration: float = 8.0, dt: float = 0.005):
+    t = np.arange(0.0, duration, dt)
+    steer = max_steer * np.clip(t / (0.75 * duration), 0.0, 1.0)
+    return Inputs(0.0, dt, steer, np.full_like(t, 150.0), np.zeros_like(t))
+
+
+@pytest.mark.parametrize("scale", [0.8, 1.2])
+def test_peak_lateral_acceleration_scales_with_friction(x64, scale):
+    vehicle = default_vehicle()
+    theta = theta_from_dict(SEED_TRUE_THETA)
+    inputs = _ramp_steer(0.12)
+    base, ok0 = simulate(theta, inputs, vehicle, v0=15.0)
+    scaled, ok1 = simulate(
+        theta,
+        inputs,
+        vehicle,
+        v0=15.0,
+        effects=("tyre_friction",),
+        effect_params={"tyre_friction": {"scale": scale}},
+    )
+    assert ok0 and ok1
+    peak = lambda ys: np.max(np.abs(ys[:, 1]))
+    limit = vehicle.friction * 9.81
+    assert peak(base) == pytest.approx(limit, rel=0.1)
+    assert peak(scaled) / peak(base) == pytest.approx(scale, rel=0.06)
+
+
+def test_no_effect_far_below_the_limit(x64):
+    vehicle = default_vehicle()
+    theta = theta_from_dict(SEED_TRUE_THETA)
+    inputs = _ramp_steer(0.01)  # |ay| ≈ 1 m/s², far below μg/2
+    base, _ = simulate(theta, inputs, vehicle, v0=15.0)
+    scaled, _ = simulate(
+        theta,
+        inputs,
+        vehicle,
+        v0=15.0,
+        effects=("tyre_friction",),
+        effect_params={"tyre_friction": {"scale": 1.3}},
+    )
+    assert np.max(np.abs(scaled[:, 1] - base[:, 1])) < 1e-3 * np.max(np.abs(base[:, 1]))
