@@ -26,13 +26,6 @@ from ._rank import (
     merge as merge,
     rank as rank,
     separability as separability,
+    verdict as verdict,
 )
-from ._report import REQUIRED_KEYS as REQUIRED_KEYS, verdict as verdict, write_report as write_report
-
-
-def __getattr__(name: str):
-    # Kept for callers written before effects carried their own metadata: `EFFECT_NAMES` is
-    # `effect_names()` read at access time (so it includes effects registered since import).
-    if name == "EFFECT_NAMES":
-        return effect_names()
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+from ._report import REQUIRED_KEYS as REQUIRED_KEYS, write_report as write_report

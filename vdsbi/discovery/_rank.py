@@ -1,4 +1,5 @@
-"""Ranking candidates by evidence, and telling look-alike effects apart (or saying why not).
+"""Ranking candidates by evidence, choosing among them, the verdict on the choice, and telling
+look-alike effects apart (or saying why not).
 
 Evidence: the BIC approximation of the log marginal likelihood relative to "none",
 
@@ -85,6 +86,45 @@ def choose(ranked: Sequence[Ranked], detected: bool) -> tuple[str, ...]:
     if not detected or not ranked or ranked[0].score < STRONG:
         return ()
     return ranked[0].effects
+
+
+def verdict(detected: bool, chosen: Sequence[str], p_after: float, alpha: float, held_improved) -> dict:
+    """One-line conclusion, and whether the chosen effects account for the whole mismatch.
+
+    `explained` needs both a residual consistent with noise after the fix (p_after ≥ α) and a
+    better held-out fit; otherwise physics outside the library remains (or the fix is absorbing
+    it), and the report says so instead of claiming the effect as the answer.
+    """
+    if not detected:
+        return {"explained": None, "text": "no mismatch detected: the base model fits within the noise"}
+    if not chosen:
+        return {
+            "explained": False,
+            "text": "mismatch detected, but no candidate effect has strong evidence: the missing "
+            "physics is outside the library (see where it is located)",
+        }
+    names = " + ".join(chosen)
+    if held_improved is False:
+        return {
+            "explained": False,
+            "text": f"mismatch detected; {names} fits the fitted part but not the held-out part: "
+            "it is absorbing physics outside the library, not naming it",
+        }
+    if p_after < alpha / 10:
+        return {
+            "explained": False,
+            "text": f"mismatch detected; {names} explains part of it (p after the fix = {p_after:.3g} < "
+            f"{alpha / 10:g}): physics outside the library remains",
+        }
+    if p_after < alpha:
+        # at level α, one complete fix in 1/α still rejects by chance: say so, do not overclaim
+        return {
+            "explained": False,
+            "text": f"mismatch detected; {names} explains most of it, but the residual test still "
+            f"rejects weakly (p after the fix = {p_after:.3g} < {alpha:g}; about 1 in {1 / alpha:.0f} "
+            "complete fixes does so by chance): something small may remain",
+        }
+    return {"explained": True, "text": f"mismatch detected and explained by {names}"}
 
 
 def _cos(a, b):

@@ -14,7 +14,7 @@ from ..simulator import CHANNELS, EFFECTS, PARAM_NAMES
 from ._candidates import all_pairs, label
 from ._data import Windows
 from ._fit import FitResult, Fitter
-from ._rank import PAIR_LOG_PRIOR, STRONG, Ranked
+from ._rank import PAIR_LOG_PRIOR, STRONG, Ranked, verdict
 
 if TYPE_CHECKING:  # annotations only (_diagnose imports this module)
     from ..io import Recording
@@ -68,45 +68,6 @@ def _at_bounds(fit: FitResult, fitter: Fitter, frac: float = 0.01) -> list[str]:
             if min(v - a, b - v) < frac * (b - a):
                 out.append(f"{e}.{k}")
     return out
-
-
-def verdict(detected: bool, chosen: Sequence[str], p_after: float, alpha: float, held_improved) -> dict:
-    """One-line conclusion, and whether the chosen effects account for the whole mismatch.
-
-    `explained` needs both a residual consistent with noise after the fix (p_after ≥ α) and a
-    better held-out fit; otherwise physics outside the library remains (or the fix is absorbing
-    it), and the report says so instead of claiming the effect as the answer.
-    """
-    if not detected:
-        return {"explained": None, "text": "no mismatch detected: the base model fits within the noise"}
-    if not chosen:
-        return {
-            "explained": False,
-            "text": "mismatch detected, but no candidate effect has strong evidence: the missing "
-            "physics is outside the library (see where it is located)",
-        }
-    names = " + ".join(chosen)
-    if held_improved is False:
-        return {
-            "explained": False,
-            "text": f"mismatch detected; {names} fits the fitted part but not the held-out part: "
-            "it is absorbing physics outside the library, not naming it",
-        }
-    if p_after < alpha / 10:
-        return {
-            "explained": False,
-            "text": f"mismatch detected; {names} explains part of it (p after the fix = {p_after:.3g} < "
-            f"{alpha / 10:g}): physics outside the library remains",
-        }
-    if p_after < alpha:
-        # at level α, one complete fix in 1/α still rejects by chance: say so, do not overclaim
-        return {
-            "explained": False,
-            "text": f"mismatch detected; {names} explains most of it, but the residual test still "
-            f"rejects weakly (p after the fix = {p_after:.3g} < {alpha:g}; about 1 in {1 / alpha:.0f} "
-            "complete fixes does so by chance): something small may remain",
-        }
-    return {"explained": True, "text": f"mismatch detected and explained by {names}"}
 
 
 def _theta_dict(x) -> dict:
