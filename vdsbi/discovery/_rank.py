@@ -8,7 +8,7 @@ Evidence: the BIC approximation of the log marginal likelihood relative to "none
 with k the number of effect parameters added and N the number of fitted residual entries
 (θ and initial speeds are common to all candidates and cancel): a log Bayes factor against
 "none". The ranking score adds the log prior odds: 0 for "none" and single effects, −3 for a
-pair (prior odds e⁻³ ≈ 1:20 against each pair — there are 45 pairs but 10 singles, and a pair
+pair (prior odds e⁻³ ≈ 1:20 against each pair — there are n(n−1)/2 pairs but n singles, and a pair
 must earn its second effect), so a pair ranks above its better member only if the data favour
 it strongly. Scores > 3 (posterior odds > 20:1 against "none") count as strong. Ranking
 confidence: posterior probabilities, exp(score) normalised over all fitted candidates. When the
