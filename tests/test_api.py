@@ -57,9 +57,9 @@ def test_api_identify_turns_failed_simulations_into_one_line_and_cleans_up(monke
     def fail(*args, **kwargs):
         raise SimulationError(0, 10)
 
-    monkeypatch.setattr(vdsbi.inference, "identify", fail)
+    monkeypatch.setattr(vdsbi.inference, "identify_problem", fail)
     out = tmp_path / "run"
-    with pytest.raises(InputError, match="segment: almost every simulation of this window failed"):
+    with pytest.raises(InputError, match="windows: almost every simulation of this drive failed"):
         api.identify(GOOD / "recording.csv", GOOD / "vehicle.json", sims=10, out_dir=out)
     assert not out.exists()
 

@@ -58,7 +58,11 @@ def drive(tmp_path_factory) -> tuple[Path, Path]:
 def full_run(drive, tmp_path_factory) -> Path:
     rec, veh = drive
     out = tmp_path_factory.mktemp("runs") / "full"
-    assert main(["identify", str(rec), "--vehicle", str(veh), "--out", str(out), *BUDGET, "--quiet"]) == 0
+    compare = ["--compare", '{"l_f": 1.3, "C_alpha_f": 60000}']
+    assert (
+        main(["identify", str(rec), "--vehicle", str(veh), "--out", str(out), *BUDGET, *compare, "--quiet"])
+        == 0
+    )
     return out
 
 
@@ -72,8 +76,13 @@ def test_identify_writes_all_files(full_run):
         assert lo <= p["q05"] <= p["q50"] <= p["q95"] <= hi, name
         assert p["std"] > 0
     assert post["channels"] == list(CHANNELS)
-    assert post["noise_std"] == NOISE and set(post["noise_source"].values()) == {"vehicle file"}
-    assert post["segment"]["t0"] == 0.0 and post["segment"]["t1"] == pytest.approx(3.0)
+    prob = post["problem"]
+    assert prob["noise_std"] == NOISE and set(prob["noise_source"].values()) == {"vehicle file"}
+    (window,) = prob["windows"]  # a 3-s drive: one window, its last 30 % held out
+    assert window["t0"] == 0.0 and window["t1"] == pytest.approx(3.0)
+    assert window["held_from"] == pytest.approx(0.7 * 3.0)
+    assert post["not_identified"] == [n for n in PARAM_NAMES if not post["parameters"][n]["identified"]]
+    assert set(post["validation"]["posterior_mean"]["channels"]) == set(CHANNELS)
     assert post["settings"]["rounds"] == 2 and post["settings"]["sims_per_round"] == 100
     assert post["vdsbi_version"]
     samples = pd.read_csv(full_run / "samples.csv")
@@ -173,3 +182,15 @@ def test_bad_input_exits_2_without_output(drive, tmp_path, case, capsys):
     assert err.startswith("vdsbi: error:") and "\n" not in err
     assert ("steer" if case == "missing_column" else "mass") in err
     assert not out.exists()
+
+
+def test_compare_scores_reference_values_on_the_held_out_part(full_run):
+    post = json.loads((full_run / "posterior.json").read_text())
+    ref = post["validation"]["reference"]
+    assert ref["given"] == {"l_f": 1.3, "C_alpha_f": 60000.0}
+    assert ref["theta"]["l_f"] == pytest.approx(1.3) and ref["theta"]["C_alpha_f"] == pytest.approx(60000.0)
+    # Parameters the reference does not give come from the posterior mean.
+    assert ref["theta"]["C_alpha_r"] == pytest.approx(post["parameters"]["C_alpha_r"]["mean"], rel=1e-5)
+    for scores in (ref["channels"], post["validation"]["posterior_mean"]["channels"]):
+        assert set(scores) == set(CHANNELS)
+        assert all(v["nrmse"] >= 0 and v["chi2_dof"] >= 0 and v["samples"] > 0 for v in scores.values())

@@ -24,7 +24,7 @@ def test_peak_lateral_acceleration_scales_with_friction(x64, scale):
         vehicle,
         v0=15.0,
         effects=("tyre_friction",),
-        effect_params={"tyre_friction": {"scale": scale}},
+        effect_params={"tyre_friction": {"scale_front": scale, "scale_rear": scale}},
     )
     assert ok0 and ok1
     peak = lambda ys: np.max(np.abs(ys[:, 1]))
@@ -44,6 +44,6 @@ def test_no_effect_far_below_the_limit(x64):
         vehicle,
         v0=15.0,
         effects=("tyre_friction",),
-        effect_params={"tyre_friction": {"scale": 1.3}},
+        effect_params={"tyre_friction": {"scale_front": 1.3, "scale_rear": 1.3}},
     )
     assert np.max(np.abs(scaled[:, 1] - base[:, 1])) < 1e-3 * np.max(np.abs(base[:, 1]))

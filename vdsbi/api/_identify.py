@@ -7,15 +7,27 @@ import contextlib
 import dataclasses
 import json
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .. import __version__
-from ..io import InputError
-from ..io._errors import SimulationError
+from ..io import InputError, SimulationError
+from ..problem import (
+    Problem,
+    ProblemSettings,
+    grip_used,
+    make_problem,
+    parameter_names,
+    parameter_units,
+    prior_box,
+    simulate_draws,
+    split_parameters,
+    validate,
+    windowed_model,
+)
 from ._outputs import (
     CHECKPOINT,
     ESTIMATOR,
@@ -25,7 +37,6 @@ from ._outputs import (
     write_outputs,
     write_text_atomically,
 )
-from ._prepare import Problem, prepare
 from ._progress import Progress
 
 
@@ -72,14 +83,23 @@ def identify(
     epochs: int | None = None,
     num_samples: int = 1000,
     segment: tuple[float, float] | None = None,
-    max_duration: float = 20.0,
+    max_duration: float | None = None,
+    longitudinal: str = "auto",
+    bandwidth: float | str | None = "auto",
+    effects: Sequence[str] | None = None,
+    compare: Mapping[str, Any] | None = None,
     ppc_draws: int = 100,
     progress: bool = False,
     rate: float = 200.0,
     on_round_end: Callable | None = None,
     log: Callable[[str], None] | None = None,
 ) -> IdentifyResult:
-    """Posterior over θ = PARAM_NAMES from one recording (the engine behind `vdsbi identify`).
+    """Posterior over θ (and enabled effects' parameters) from a whole drive.
+
+    Stages: read the drive; make its problem (windows over every usable stretch, the last 30 %
+    held out); choose the effects; train APT on the training windows; summarise; flag the
+    parameters the drive cannot inform (Fisher information); validate on the held-out driving;
+    posterior predictive check; write the files.
 
     Args:
         recording: path (.csv, .parquet, bag) or a `vdsbi.io.Recording`.
@@ -92,7 +112,16 @@ def identify(
         resume: continue from `out_dir`'s checkpoint (must have been made with the same settings).
         epochs: maximum training epochs per round (default: IdentifySettings' 40).
         num_samples: posterior samples kept.
-        segment: (t0, t1) s to use; default the most excited usable stretch of <= max_duration s.
+        segment: (t0, t1) s to restrict the drive to (default: all of it).
+        max_duration: longest window, s (default 20 in torque mode, 10 in speed mode).
+        longitudinal: "torque", "speed" (follow the measured speed; for logs without torques
+            or with commanded ones) or "auto" (torque when the recording has torques).
+        bandwidth: low-pass cutoff, Hz, shared by measured and simulated channels ("auto": none
+            with torques, 5 Hz following the speed; None: none).
+        effects: effects whose parameters join θ; None adds `tyre_friction` when the drive
+            uses more than half the grip (Dugoff leaves its linear range there), else none.
+        compare: reference values {param: value} (e.g. a lab's) scored on the held-out part
+            beside the posterior mean.
         ppc_draws: posterior draws simulated for the predictive check.
         progress: tqdm bars.
         on_round_end: extra hook called with the APT state after each round's checkpoint.
@@ -100,26 +129,28 @@ def identify(
 
     Raises:
         InputError: bad recording, vehicle, settings, a non-empty `out_dir` without `resume`, or
-            a window in which almost every simulation fails.
+            a drive on which almost every simulation fails.
     """
     import jax
 
     say = log or (lambda s: None)
     rec, veh = _load(recording, vehicle, rate)
     settings = _settings(rounds, sims, embedding, epochs, num_samples)
-    if max_duration <= 0:
-        raise InputError("settings", "--max-duration", "must be > 0")
-    prob = prepare(rec, veh, segment=segment, max_duration=max_duration)
-    run_info = _run_info(rec, prob, settings, seed)
+    prob = _problem(rec, veh, longitudinal, segment, max_duration, bandwidth)
+    effects = _effects(prob, effects, say)
+    box = prior_box(veh, effects)
+    run_info = _run_info(rec, prob, settings, seed, effects)
     _describe(prob, say)
-    sim = prob.simulator()
     k_id, k_ppc = jax.random.split(jax.random.key(int(seed)))
     working = contextlib.nullcontext() if out_dir is None else checkpoint_dir(out_dir, resume=resume)
     with working as out:
         state = None if out is None else _start(out, run_info, resume, say)
-        posterior, samples, state = _train(k_id, prob, sim, settings, state, out, progress, on_round_end, say)
-        summary = _summary(prob, samples, state, run_info)
-        ppc = posterior_predictive(k_ppc, sim, samples, ppc_draws)
+        posterior, samples, state = _train(
+            k_id, prob, box, effects, settings, state, out, progress, on_round_end, say
+        )
+        summary = _summary(prob, samples, state, run_info, box, effects)
+        summary["validation"] = _validation(prob, summary, effects, compare)
+        ppc = posterior_predictive(k_ppc, prob, samples, effects, ppc_draws)
         summary["ppc"] = _ppc_summary(prob, ppc)
         result = IdentifyResult(posterior, samples, summary, out)
         if out is not None:
@@ -153,26 +184,61 @@ def _settings(rounds, sims, embedding, epochs, num_samples):
     )
 
 
-def _run_info(rec, prob: Problem, settings, seed: int) -> dict[str, Any]:
+def _problem(rec, veh, longitudinal: str, segment, max_duration: float | None, bandwidth) -> Problem:
+    """The drive as a `Problem`: 20-s windows with torques, 10-s windows following the speed."""
+    if max_duration is not None and max_duration <= 0:
+        raise InputError("settings", "--max-duration", "must be > 0")
+    if longitudinal not in ("auto", "torque", "speed"):
+        raise InputError("settings", "--longitudinal", f"must be auto, torque or speed, got {longitudinal!r}")
+    speed = longitudinal == "speed" or (longitudinal == "auto" and not rec.has_torques)
+    window = max_duration if max_duration is not None else (10.0 if speed else 20.0)
+    return make_problem(
+        rec, veh, ProblemSettings(longitudinal=longitudinal, max_window=window, segment=segment)
+    )
+
+
+def _effects(prob: Problem, effects, say) -> tuple[str, ...]:
+    """The user's effects, or `tyre_friction` where the drive reaches past Dugoff's linear range."""
+    from ..simulator import EFFECTS
+
+    if effects is not None:
+        unknown = [e for e in effects if e not in EFFECTS]
+        if unknown:
+            raise InputError(
+                "settings", "--effects", f"unknown effect {unknown[0]!r}; known: {', '.join(EFFECTS)}"
+            )
+        return tuple(effects)
+    used = grip_used(prob)
+    if used is not None and used > 0.5:
+        say(f"the drive uses {used:.0%} of the grip μ·g: friction joins θ (tyre_friction.scale)")
+        return ("tyre_friction",)
+    return ()
+
+
+def _run_info(rec, prob: Problem, settings, seed: int, effects) -> dict[str, Any]:
     """What run.json records: a checkpoint resumes only a run with the same."""
     return {
         "recording": str(rec.source),
         "seed": int(seed),
         "settings": json.loads(json.dumps(dataclasses.asdict(settings), default=str)),
-        "segment": [prob.segment["t0"], prob.segment["t1"]],
+        "longitudinal": prob.longitudinal,
+        "windows": [[w.t0, w.t1, w.role] for w in prob.windows],
         "channels": list(prob.channels),
+        "effects": list(effects),
         "rate_hz": rec.rate,
     }
 
 
 def _describe(prob: Problem, say: Callable[[str], None]) -> None:
-    seg = prob.segment
-    say(f"segment {seg['t0']:.2f} .. {seg['t1']:.2f} s ({seg['how']}); channels {', '.join(prob.channels)}")
+    info = prob.summary()
+    say(f"{prob.longitudinal}-driven; {info['how']}; channels {', '.join(prob.channels)}")
+    say(f"fitted {info['train_seconds']:.1f} s, held out {info['held_out_seconds']:.1f} s")
     estimated = any(s.startswith("estimated") for s in prob.noise_source.values())
     say(
         "noise std "
-        + ", ".join(f"{c} {v:.3g}" for c, v in prob.noise_std.items())
-        + (" (estimated)" if estimated else " (vehicle file)")
+        + ", ".join(f"{c} {v:.3g}" for c, v in zip(prob.channels, prob.sigma))
+        + (" (estimated" if estimated else " (vehicle file")
+        + (", after the shared low-pass)" if prob.decimator is not None else ")")
     )
 
 
@@ -183,8 +249,8 @@ def _start(out: Path, run_info: dict, resume: bool, say: Callable[[str], None]):
     state = None
     if resume and (out / CHECKPOINT).exists():
         saved = json.loads((out / RUN_FILE).read_text())
-        if saved != run_info:
-            diff = [k for k in run_info if saved.get(k) != run_info[k]]
+        if saved != json.loads(json.dumps(run_info)):
+            diff = [k for k in run_info if saved.get(k) != json.loads(json.dumps(run_info[k]))]
             raise InputError(out / RUN_FILE, ", ".join(diff), "differs from this run's; cannot resume")
         state = load_state(out / CHECKPOINT)
         say(f"resuming after round {state.round} of {run_info['settings']['rounds']}")
@@ -192,9 +258,9 @@ def _start(out: Path, run_info: dict, resume: bool, say: Callable[[str], None]):
     return state
 
 
-def _train(key, prob: Problem, sim, settings, state, out, progress, on_round_end, say):
-    """`vdsbi.inference.identify` with progress bars, per-round checkpoints and messages."""
-    from ..inference import identify as npe_identify, save_state
+def _train(key, prob: Problem, box, effects, settings, state, out, progress, on_round_end, say):
+    """`vdsbi.inference.identify_problem` with progress bars, per-round checkpoints and messages."""
+    from ..inference import BoxPrior, identify_problem, save_state
 
     bars = Progress(settings.rounds, progress)
 
@@ -211,14 +277,15 @@ def _train(key, prob: Problem, sim, settings, state, out, progress, on_round_end
         if on_round_end is not None:
             on_round_end(st)
 
-    readings = prob.rec.measured(prob.channels)
+    names = parameter_names(effects)
+    prior = BoxPrior([box[n][0] for n in names], [box[n][1] for n in names], names=names)
     try:
-        return npe_identify(
+        return identify_problem(
             key,
-            sim,
-            prob.prior(),
-            readings,
+            prob,
+            prior,
             settings,
+            effects=effects,
             on_round_end=round_end,
             on_epoch_end=bars.epoch,
             on_simulate=bars.simulate,
@@ -227,52 +294,96 @@ def _train(key, prob: Problem, sim, settings, state, out, progress, on_round_end
     except SimulationError as err:
         # A property of this recording, not a bug: say so in one line.
         raise InputError(
-            prob.rec.source,
-            "segment",
-            f"almost every simulation of this window failed ({err}); check the time base, "
-            "units of the torques and that the car keeps rolling in the window",
+            prob.source,
+            "windows",
+            f"almost every simulation of this drive failed ({err}); check the time base, "
+            "units of the torques and that the car keeps rolling",
         ) from None
     finally:
         bars.close()
 
 
-def _summary(prob: Problem, samples: np.ndarray, state, run_info: dict) -> dict[str, Any]:
-    """posterior.json without its predictive check."""
+def _summary(prob: Problem, samples: np.ndarray, state, run_info: dict, box, effects) -> dict[str, Any]:
+    """posterior.json without its validation and predictive check; parameters the drive cannot
+    inform are flagged `identified: false` (their posterior is the prior, not an estimate)."""
+    from ..diagnostics import identifiability
+
+    names = parameter_names(effects)
+    params = summarise(samples, box, names, parameter_units(effects))
+    mean = np.array([params[n]["mean"] for n in names])
+    theta, ep = split_parameters(mean, effects)
+    info = identifiability(prob, np.asarray(theta), box, effects=effects, effect_params=ep)
+    for n, v in info.items():
+        params[n]["identified"] = v["identified"]
+        params[n]["crb_std"] = v["posterior_std"]
+        if not v["identified"]:
+            params[n]["not_identified_because"] = v["reason"]
     return {
         "vdsbi_version": __version__,
         "recording": run_info["recording"],
-        "parameters": summarise(samples, prob.vehicle.default_prior()),
+        "parameters": params,
+        "not_identified": [n for n in names if params[n].get("identified") is False],
+        "effects": list(effects),
+        "problem": prob.summary(),
         "channels": list(prob.channels),
-        "segment": prob.segment,
-        "noise_std": prob.noise_std,
-        "noise_source": prob.noise_source,
-        "v0_range": list(prob.v0_range),
         "seed": run_info["seed"],
         "settings": run_info["settings"],
         "rounds": [{k: v for k, v in h.items() if isinstance(v, (int, float, str))} for h in state.history],
     }
 
 
-def posterior_predictive(key, sim, samples: np.ndarray, n: int) -> dict[str, np.ndarray]:
-    """Simulate `n` posterior draws (with sensor noise); 5/50/95 % bands per sample and channel."""
+def _validation(prob: Problem, summary: dict, effects, compare) -> dict[str, Any]:
+    """Held-out scores of the posterior mean, and of the user's reference values (the
+    parameters a reference does not give are taken from the posterior mean)."""
+    names = parameter_names(effects)
+    mean = np.array([summary["parameters"][n]["mean"] for n in names])
+    out = {"posterior_mean": _score(prob, mean, effects)}
+    if compare:
+        unknown = [k for k in compare if k not in names]
+        if unknown:
+            raise InputError(
+                "settings", "--compare", f"unknown parameter {unknown[0]!r}; known: {', '.join(names)}"
+            )
+        ref = np.array([float(compare.get(n, m)) for n, m in zip(names, mean)])
+        out["reference"] = _score(prob, ref, effects) | {"given": {k: float(v) for k, v in compare.items()}}
+    return out
+
+
+def _score(prob: Problem, values: np.ndarray, effects) -> dict[str, Any]:
+    from ..simulator import get_effect
+
+    theta, ep = split_parameters(values, effects)
+    eff_values = {
+        e: {p: float(v) for p, v in zip(get_effect(e).param_names, np.asarray(x))}
+        for e, x in zip(effects, ep)
+    }
+    return validate(prob, np.asarray(theta), effects, eff_values)
+
+
+def posterior_predictive(key, prob: Problem, samples: np.ndarray, effects, n: int) -> dict[str, Any]:
+    """`n` posterior draws simulated with sensor noise on every window; 5/50/95 % bands."""
     import jax.numpy as jnp
 
     n = min(n, samples.shape[0])
-    ys, ok = sim(key, jnp.asarray(samples[:n], jnp.float32))
+    wm = windowed_model(prob, effects)
+    theta, ep = split_parameters(jnp.asarray(samples[:n]), effects)
+    ys, ok = simulate_draws(key, wm, theta, sigma_raw=prob.sigma_raw, effect_params=ep)
     ys = np.asarray(ys)[np.asarray(ok)]
     q = np.quantile(ys, [0.05, 0.5, 0.95], axis=0) if ys.shape[0] else np.full((3, *ys.shape[1:]), np.nan)
     return {"q05": q[0], "q50": q[1], "q95": q[2], "n": ys.shape[0]}
 
 
-def _ppc_summary(prob: Problem, ppc: dict[str, np.ndarray]) -> dict[str, Any]:
-    obs = prob.rec.measured(prob.channels)
-    inside = (obs >= ppc["q05"]) & (obs <= ppc["q95"])
+def _ppc_summary(prob: Problem, ppc: dict[str, Any]) -> dict[str, Any]:
+    inside = (prob.y >= ppc["q05"]) & (prob.y <= ppc["q95"])
+    frac = lambda mask: {
+        c: (float(inside[..., i][mask].mean()) if ppc["n"] and mask.any() else None)
+        for i, c in enumerate(prob.channels)
+    }
     return {
         "draws": int(ppc["n"]),
         # None when no posterior draw simulated successfully (no band to compare with).
-        "fraction_inside_90pct_band": {
-            c: (float(inside[:, i].mean()) if ppc["n"] else None) for i, c in enumerate(prob.channels)
-        },
+        "fraction_inside_90pct_band": frac(prob.train),
+        "fraction_inside_90pct_band_held_out": frac(prob.held),
     }
 
 

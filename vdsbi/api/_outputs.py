@@ -7,7 +7,7 @@ import contextlib
 import os
 import shutil
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -110,18 +110,26 @@ def write_text_atomically(path: str | os.PathLike, text: str) -> None:
     write_atomically(path, lambda tmp: Path(tmp).write_text(text))
 
 
-def summarise(samples: np.ndarray, prior_box: dict[str, tuple[float, float]]) -> dict[str, dict[str, float]]:
-    """Per parameter: mean, std, 5/50/95 % quantiles, unit and prior range of (N, 6) samples."""
-    q = np.quantile(samples, [0.05, 0.5, 0.95], axis=0)
+def summarise(
+    samples: np.ndarray,
+    prior_box: dict[str, tuple[float, float]],
+    names: Sequence[str] = PARAM_NAMES,
+    units: Mapping[str, str] = PARAM_UNITS,
+) -> dict[str, dict[str, float]]:
+    """Per parameter: mean, std, 2.5/5/50/95/97.5 % quantiles, unit and prior range of (N, P)
+    samples."""
+    q = np.quantile(samples, [0.05, 0.5, 0.95, 0.025, 0.975], axis=0)
     out = {}
-    for i, n in enumerate(PARAM_NAMES):
+    for i, n in enumerate(names):
         out[n] = {
             "mean": float(samples[:, i].mean()),
             "std": float(samples[:, i].std()),
             "q05": float(q[0, i]),
             "q50": float(q[1, i]),
             "q95": float(q[2, i]),
-            "unit": PARAM_UNITS[n] if isinstance(PARAM_UNITS, dict) else PARAM_UNITS[i],
+            "q025": float(q[3, i]),
+            "q975": float(q[4, i]),
+            "unit": units.get(n, "-"),
             "prior": [float(v) for v in prior_box[n]],
         }
     return out
@@ -134,12 +142,13 @@ def write_outputs(out: Path, result: Any, prob: Any, ppc: dict[str, np.ndarray])
 
     tmp = Path(tempfile.mkdtemp(prefix=".outputs-", dir=out))
     try:
-        pd.DataFrame(result.samples, columns=list(PARAM_NAMES)).to_csv(
+        names = list(result.summary["parameters"])
+        pd.DataFrame(result.samples, columns=names).to_csv(
             tmp / "samples.csv", index=False, float_format="%.9g"
         )
         (tmp / "posterior.json").write_text(result.to_json() + "\n")
         result.posterior.save(tmp / ESTIMATOR)
-        pairplot(result.samples, list(PARAM_NAMES), tmp / "pairplot.png")
+        pairplot(result.samples, names, tmp / "pairplot.png")
         ppc_plot(prob, ppc, tmp / "ppc.png")
         for f in tmp.iterdir():
             os.replace(f, out / f.name)

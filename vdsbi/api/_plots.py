@@ -68,23 +68,43 @@ def pairplot(
 
 
 def ppc_plot(prob: Any, ppc: dict[str, np.ndarray], path: str | os.PathLike) -> None:
-    """Per measured channel of `prob`: the recording over the predictive median and 90 % band."""
+    """Per compared channel of a `Problem`: the recording over the posterior-predictive median
+    and 90 % band, window by window; held-out windows (or parts) shaded grey."""
     plt = _pyplot()
-    t = prob.rec.t
-    obs = prob.rec.measured(prob.channels)
     c = len(prob.channels)
-    fig, axes = plt.subplots(c, 1, figsize=(9, 1.8 * c), sharex=True)
+    fig, axes = plt.subplots(c, 1, figsize=(11, 2.0 * c), sharex=True)
     axes = np.atleast_1d(axes)
-    for i, name in enumerate(prob.channels):
-        ax = axes[i]
-        ax.fill_between(
-            t, ppc["q05"][:, i], ppc["q95"][:, i], color="C0", alpha=0.3, label="posterior predictive 90 %"
-        )
-        ax.plot(t, ppc["q50"][:, i], color="C0", lw=1, label="predictive median")
-        ax.plot(t, obs[:, i], color="k", lw=0.7, label="recording")
-        ax.set_ylabel(name)
+    for w in range(prob.num_windows):
+        t = prob.t_out[w]
+        valid = prob.valid[w]
+        held = prob.held[w]
+        for i, name in enumerate(prob.channels):
+            ax = axes[i]
+            if held.any():
+                ax.axvspan(t[held].min(), t[held].max(), color="0.9", zorder=0)
+            first = w == 0
+            ax.fill_between(
+                t[valid],
+                ppc["q05"][w, valid, i],
+                ppc["q95"][w, valid, i],
+                color="C0",
+                alpha=0.3,
+                label="posterior predictive 90 %" if first else None,
+            )
+            ax.plot(
+                t[valid],
+                ppc["q50"][w, valid, i],
+                color="C0",
+                lw=1,
+                label="predictive median" if first else None,
+            )
+            ax.plot(t[valid], prob.y[w, valid, i], color="k", lw=0.7, label="recording" if first else None)
+            ax.set_ylabel(f"{name} [{UNITS[name]}]")
     axes[0].legend(loc="upper right", fontsize=7)
+    axes[0].set_title("grey: held out (never seen by the fit)", fontsize=8, loc="left")
     axes[-1].set_xlabel("t [s]")
+    for ax in axes:
+        ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
@@ -98,8 +118,9 @@ def drive_plot(rec: Any, theta: np.ndarray, effects: Sequence[str], path: str | 
     ax.plot(rec.t, rec.steer, color="k")
     ax.set_ylabel("steer [rad]")
     ax = axes[0, 1]
-    ax.plot(rec.t, rec.torque_front, label="front")
-    ax.plot(rec.t, rec.torque_rear, label="rear")
+    if rec.has_torques:
+        ax.plot(rec.t, rec.torque_front, label="front")
+        ax.plot(rec.t, rec.torque_rear, label="rear")
     ax.set_ylabel("axle torque [N·m]")
     ax.legend(loc="best", fontsize=8)
     for ax, c in zip(axes[1:].ravel(), CHANNELS):

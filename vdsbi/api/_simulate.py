@@ -35,8 +35,8 @@ class SimulateResult:
     theta: np.ndarray
     v0: float
     steer: np.ndarray
-    torque_front: np.ndarray
-    torque_rear: np.ndarray
+    torque_front: np.ndarray | None
+    torque_rear: np.ndarray | None
 
     def to_frame(self):
         import pandas as pd
@@ -71,6 +71,7 @@ def simulate(
     effect_params: Mapping[str, Mapping[str, float]] | None = None,
     noise: str = "none",
     seed: int = 0,
+    longitudinal: str = "auto",
 ) -> SimulateResult:
     """One simulation of `vehicle` (a Vehicle, a file, or None for the built-in one).
 
@@ -81,6 +82,9 @@ def simulate(
         effects, effect_params: effects to enable and {effect: {param: value}}.
         noise: sensor noise, "none", "seed" (relative) or "vehicle" (the vehicle's noise_std).
         seed: seed of the noise.
+        longitudinal: with a recording, "torque", "speed" (follow its measured speed) or
+            "auto" (torque if it has torque columns). A recording is predicted from its own
+            initial state: measured speed and yaw rate, steady-state side speed under θ.
 
     Raises:
         InputError: θ, v0 or the noise model does not fit the vehicle.
@@ -93,13 +97,24 @@ def simulate(
     veh, source = load_vehicle(vehicle)
     th = checked_theta(theta, veh)
     rec = inputs if isinstance(inputs, Recording) else None
-    inp = rec.inputs() if rec is not None else inputs
+    mode = "torque" if rec is None else _mode(rec, longitudinal)
+    inp = rec.inputs(longitudinal=mode, wheel_radius=veh.wheel_radius) if rec is not None else inputs
     if v0 is None and rec is None:
         raise InputError("--v0", "v0", "give an initial speed for bare inputs")
     v0 = first_speed(rec, veh) if v0 is None else checked_v0(v0)
     if noise == "vehicle" and not veh.noise_std:
         raise InputError(source, "noise_std", "--noise vehicle needs noise_std in the vehicle file")
-    ys, ok = solve_one(th, inp, veh, v0=v0, effects=effects, effect_params=effect_params)
+    lateral0 = None if rec is None else _lateral0(rec, th, veh, v0)
+    ys, ok = solve_one(
+        th,
+        inp,
+        veh,
+        v0=v0,
+        effects=effects,
+        effect_params=effect_params,
+        longitudinal=mode,
+        lateral0=lateral0,
+    )
     if ok and noise != "none":
         ys = np.asarray(sensor_noise(noise, veh.noise_std)(jax.random.key(seed), ys))
     given = rec if rec is not None else inp
@@ -111,6 +126,28 @@ def simulate(
         theta=th,
         v0=v0,
         steer=np.asarray(given.steer, dtype=float),
-        torque_front=np.asarray(given.torque_front, dtype=float),
-        torque_rear=np.asarray(given.torque_rear, dtype=float),
+        torque_front=None if given.torque_front is None else np.asarray(given.torque_front, dtype=float),
+        torque_rear=None if given.torque_rear is None else np.asarray(given.torque_rear, dtype=float),
     )
+
+
+def _mode(rec: Recording, longitudinal: str) -> str:
+    if longitudinal not in ("auto", "torque", "speed"):
+        raise InputError("settings", "--longitudinal", f"must be auto, torque or speed, got {longitudinal!r}")
+    if longitudinal == "auto":
+        return "torque" if rec.has_torques else "speed"
+    if longitudinal == "torque" and not rec.has_torques:
+        raise InputError(rec.source, "torque_front", "no torque columns; use --longitudinal speed")
+    return longitudinal
+
+
+def _lateral0(rec: Recording, theta: np.ndarray, vehicle: Vehicle, v0: float):
+    """The recording's own initial lateral state: its yaw rate over the first 0.25 s and the
+    steady-state side speed for it under θ (zero without a yaw-rate channel)."""
+    from ..simulator import steady_lateral_state
+
+    if "yaw_rate" not in rec.channels:
+        return None
+    r0 = float(np.mean(rec.channels["yaw_rate"][: max(1, int(round(0.25 * rec.rate)))]))
+    vy0, r0 = steady_lateral_state(np.asarray(theta), vehicle, v0, r0)
+    return np.array([float(vy0), float(r0)])

@@ -27,7 +27,22 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of the test's simulated null")
     p.add_argument("--top-pairs", type=int, default=3, help="fit pairs among this many best singles")
     p.add_argument("--effects", default=None, help="comma-separated effects to consider (default all)")
-    p.add_argument("--max-windows", type=int, default=3, help="most windows (≤ 20 s each) fitted")
+    p.add_argument(
+        "--max-windows", type=int, default=None, help="most windows fitted (default: the whole drive)"
+    )
+    p.add_argument(
+        "--max-window",
+        type=float,
+        default=None,
+        help="longest window, s (default 20 with torques, 10 following the speed)",
+    )
+    p.add_argument(
+        "--longitudinal",
+        choices=("auto", "torque", "speed"),
+        default="auto",
+        help="torque: wheels driven by the recorded torques; speed: follow the measured speed (no "
+        "or commanded torques); auto (default): torque if the recording has torque columns",
+    )
     p.add_argument(
         "--final-dt",
         type=float,
@@ -52,6 +67,8 @@ def run(args) -> int:
             top_pairs=args.top_pairs,
             candidates=candidates,
             max_windows=args.max_windows,
+            longitudinal=args.longitudinal,
+            **({} if args.max_window is None else {"max_window": args.max_window}),
             final_dt=args.final_dt,
             quiet=args.quiet,
             plots=not args.no_plots,

@@ -29,7 +29,40 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true", help="continue from DIR's checkpoint")
     p.add_argument("--quiet", action="store_true", help="no progress bars or messages")
     p.add_argument("--segment", type=_args.segment, metavar="T0:T1", help="use this stretch, s")
-    p.add_argument("--max-duration", type=float, default=20.0, help="longest stretch used, s (default 20)")
+    p.add_argument(
+        "--max-duration",
+        type=float,
+        default=None,
+        help="longest window, s (default 20 with torques, 10 following the speed)",
+    )
+    p.add_argument(
+        "--longitudinal",
+        choices=("auto", "torque", "speed"),
+        default="auto",
+        help="torque: wheels driven by the recorded torques; speed: follow the measured speed (no "
+        "or commanded torques); auto (default): torque if the recording has torque columns",
+    )
+    p.add_argument(
+        "--bandwidth",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="low-pass both the recording and the simulations at HZ before comparing (default: none "
+        "with torques, 5 Hz following the speed: real IMUs carry vibration above the body dynamics)",
+    )
+    p.add_argument(
+        "--effects",
+        default=None,
+        metavar="NAME[,NAME...]",
+        help="effects whose parameters join θ (default: tyre_friction when the drive uses more "
+        "than half the grip; 'none' for none)",
+    )
+    p.add_argument(
+        "--compare",
+        default=None,
+        metavar="VALUES.json",
+        help="reference values {param: value} (e.g. a lab's) scored on the held-out driving too",
+    )
     p.add_argument("--rate", type=float, default=200.0, help="model rate, Hz (default 200)")
     return p
 
@@ -49,6 +82,10 @@ def run(args) -> int:
         num_samples=args.samples,
         segment=args.segment,
         max_duration=args.max_duration,
+        longitudinal=args.longitudinal,
+        bandwidth="auto" if args.bandwidth is None else args.bandwidth,
+        effects=_effects(args.effects),
+        compare=_compare(args.compare),
         rate=args.rate,
         progress=not quiet and sys.stderr.isatty(),
         log=None if quiet else (lambda s: print(s, flush=True)),
@@ -57,3 +94,17 @@ def run(args) -> int:
         print(res.table())
         print(f"wrote {args.out}/posterior.json, samples.csv, pairplot.png, ppc.png, {api.ESTIMATOR}")
     return 0
+
+
+def _effects(text: str | None) -> list[str] | None:
+    if text is None:
+        return None
+    return [] if text.strip() == "none" else _args.effect_names(text.split(","))
+
+
+def _compare(text: str | None) -> dict[str, float] | None:
+    if text is None:
+        return None
+    return {
+        str(k): _args.number(v, "--compare", str(k)) for k, v in _args.json_object(text, "--compare").items()
+    }

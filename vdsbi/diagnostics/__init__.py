@@ -27,6 +27,7 @@ from ._fisher import (
     report_markdown as report_markdown,
     score_fisher_mc as score_fisher_mc,
 )
+from ._identifiability import identifiability as identifiability
 from ._least_squares import (
     FitResult as FitResult,
     LeastSquaresResult as LeastSquaresResult,

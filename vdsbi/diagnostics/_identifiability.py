@@ -19,7 +19,7 @@ overstated.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -46,6 +46,9 @@ def identifiability(
     problem: Problem,
     theta,
     prior_box: Mapping[str, tuple[float, float]],
+    *,
+    effects: Sequence[str] = (),
+    effect_params: tuple = (),
     solver: Solver = Solver(),
 ) -> dict[str, dict]:
     """Per parameter: prior std, Laplace posterior std at θ, their ratio, and a verdict.
@@ -54,19 +57,22 @@ def identifiability(
         problem: the drive (its training samples are used).
         theta: (6,) where to evaluate (e.g. the posterior mean or the prior centre).
         prior_box: {name: (low, high)} uniform prior.
+        effects, effect_params: enabled effects at fixed values (their own parameters are
+            not assessed here).
 
     Returns:
         {name: {"prior_std", "posterior_std", "ratio", "identified", "reason"}}.
     """
     train = problem.select("train")
-    wm = windowed_model(train, (), solver)
+    wm = windowed_model(train, effects, solver)
+    effect_params = tuple(jnp.asarray(p) for p in effect_params)
     lo = np.array([prior_box[n][0] for n in PARAM_NAMES])
     hi = np.array([prior_box[n][1] for n in PARAM_NAMES])
     scale = hi - lo  # work in prior-width units so the matrix is well conditioned
     theta = np.asarray(theta, dtype=float)
 
     def compared(u):
-        ys, _ = wm(jnp.asarray(theta) + u * scale)
+        ys, _ = wm(jnp.asarray(theta) + u * scale, effect_params)
         return ys
 
     u0 = jnp.zeros(len(PARAM_NAMES))

@@ -9,7 +9,7 @@ from ._candidates import (
     pair_candidates as pair_candidates,
     single_candidates as single_candidates,
 )
-from ._data import Windows as Windows, make_windows as make_windows, noise_sigma as noise_sigma
+from ._data import fit_data as fit_data
 from ._diagnose import (
     DiagnoseSettings as DiagnoseSettings,
     DiagnosisResult as DiagnosisResult,

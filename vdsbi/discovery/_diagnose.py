@@ -21,9 +21,10 @@ import numpy as np
 
 from ..diagnostics import Localisation, MisspecificationTest, locate_mismatch, misspecification_test
 from ..io import Recording, read_recording, read_vehicle
+from ..problem import Problem, ProblemSettings, make_problem
 from ..simulator import PARAM_NAMES, Vehicle
 from ._candidates import effect_names, effect_space, label, pair_candidates, single_candidates
-from ._data import Windows, make_windows
+from ._data import compared_dt, compared_inputs, fit_data
 from ._fit import FitResult, Fitter
 from ._rank import STRONG, Ranked, choose, merge, rank, separability
 from ._report import build_report, write_report
@@ -53,7 +54,7 @@ class DiagnosisResult:
     """Everything `diagnose` found; `report` is what report.json holds."""
 
     report: dict
-    windows: Windows
+    windows: Problem
     base: FitResult
     final: FitResult
     ranked: list[Ranked]
@@ -72,24 +73,26 @@ class DiagnosisResult:
         return bool(self.report["mismatch_detected"])
 
 
-def _stretches(fit: FitResult, windows: Windows):
+def _stretches(fit: FitResult, windows: Problem):
     """Contiguous equal-length training stretches of the whitened residual, and the matching
-    Jacobian rows: (W, L, C), (W·L·C, K), times (W, L), inputs (W, L, 3)."""
+    Jacobian rows: (W, L, C), (W·L·C, K), times (W, L), inputs (W, L, 3); windows without
+    training samples (held out whole) are skipped."""
     W = windows.num_windows
     C = len(windows.channels)
     mask = windows.train
     T_fit = int(np.max(np.nonzero(mask.any(0))[0])) + 1
     r = fit.residual.reshape(W, T_fit, C)
-    starts = [int(np.argmax(mask[w])) for w in range(W)]
-    lens = [int(mask[w].sum()) for w in range(W)]
-    L = min(lens)
+    fitted = [w for w in range(W) if mask[w].any()]
+    starts = {w: int(np.argmax(mask[w])) for w in fitted}
+    L = min(int(mask[w].sum()) for w in fitted)
+    u_all = compared_inputs(windows)
     rows = []
     res, ts, us = [], [], []
-    for w in range(W):
+    for w in fitted:
         s = starts[w]
         res.append(r[w, s : s + L])
-        ts.append(windows.t[w, s : s + L])
-        us.append(windows.u[w, s : s + L])
+        ts.append(windows.t_out[w, s : s + L])
+        us.append(u_all[w, s : s + L])
         base = (w * T_fit + np.arange(s, s + L))[:, None] * C + np.arange(C)[None]
         rows.append(base.reshape(-1))
     rows = np.concatenate(rows)
@@ -105,8 +108,11 @@ class DiagnoseSettings:
         alpha: level of the misspecification test.
         top_pairs: pairs are fitted among this many best single effects.
         candidates: effects to consider (default: every registered effect).
-        max_window, max_windows: windows cut from the usable stretches (s, count).
-        train_fraction: share of each window fitted; the rest is held out.
+        longitudinal: "torque", "speed" or "auto" (see `vdsbi.problem.ProblemSettings`).
+        max_window, max_windows: windows cut from the usable stretches (s, count; None: 20 s
+            with torques, 10 s following the speed, and all of them).
+        train_fraction: share of the usable driving fitted; the rest is held out (whole windows
+            at the end of a drive of 3 or more windows, else the end of each window).
         num_draws: simulated null draws of the test.
         single_iters, final_iters: LM iteration caps for the search and the final fit.
         search_dt, final_dt: RK4 steps, s, of the candidate search and of the base/final fits
@@ -120,8 +126,9 @@ class DiagnoseSettings:
     alpha: float = 0.05
     top_pairs: int = 3
     candidates: Sequence[str] | None = None
-    max_window: float = 20.0
-    max_windows: int = 3
+    longitudinal: str = "auto"
+    max_window: float | None = None
+    max_windows: int | None = None
     train_fraction: float = 0.7
     num_draws: int = 400
     single_iters: int = 8
@@ -183,23 +190,27 @@ class _Progress:
             print(msg, flush=True)
 
 
-def _cut_windows(recording: Recording, vehicle: Vehicle, s: DiagnoseSettings, say) -> Windows:
-    windows = make_windows(
-        recording,
-        vehicle,
-        max_window=s.max_window,
+def _cut_windows(recording: Recording, vehicle: Vehicle, s: DiagnoseSettings, say) -> Problem:
+    speed = s.longitudinal == "speed" or (s.longitudinal == "auto" and not recording.has_torques)
+    settings = ProblemSettings(
+        longitudinal=s.longitudinal,
+        max_window=s.max_window or (10.0 if speed else 20.0),
         max_windows=s.max_windows,
-        train_fraction=s.train_fraction,
+        held_out=1.0 - s.train_fraction,
     )
-    span = windows.t.shape[1] * windows.dt
-    say(f"windows: {windows.num_windows} × {span:.1f} s, channels {', '.join(windows.channels)}")
-    return windows
+    problem = make_problem(recording, vehicle, settings)
+    span = problem.t.shape[1] * problem.dt
+    say(
+        f"{problem.longitudinal}-driven; windows: {problem.num_windows} × {span:.1f} s, "
+        f"channels {', '.join(problem.channels)}"
+    )
+    return problem
 
 
-def _fitters(vehicle: Vehicle, windows: Windows, s: DiagnoseSettings) -> tuple[Fitter, Fitter]:
+def _fitters(vehicle: Vehicle, windows: Problem, s: DiagnoseSettings) -> tuple[Fitter, Fitter]:
     """The search's fitter (coarse step) and the base/final fits' (fine step), on the
     training part, over the same effects (the registry now)."""
-    train, effects = windows.fit_data("train"), effect_space()
+    train, effects = fit_data(windows, "train"), effect_space()
     coarse = Fitter(vehicle, train, dt=s.search_dt, effects=effects)
     return coarse, Fitter(vehicle, train, dt=s.final_dt, effects=effects)
 
@@ -214,25 +225,25 @@ def _fit_base(coarse: Fitter, fitter: Fitter, vehicle: Vehicle, s: DiagnoseSetti
     return base_c, base
 
 
-def _check(fit: FitResult, windows: Windows, seed: int, s: DiagnoseSettings) -> _Check:
+def _check(fit: FitResult, windows: Problem, seed: int, s: DiagnoseSettings) -> _Check:
     res, jac, ts, us = _stretches(fit, windows)
     test = misspecification_test(
-        seed, res, jac, rate=1.0 / windows.dt, channels=windows.channels, num_draws=s.num_draws
+        seed, res, jac, rate=1.0 / compared_dt(windows), channels=windows.channels, num_draws=s.num_draws
     )
     return _Check(test, res, ts, us)
 
 
-def _locate(before: _Check, windows: Windows, s: DiagnoseSettings, say) -> tuple[Localisation, bool]:
+def _locate(before: _Check, windows: Problem, s: DiagnoseSettings, say) -> tuple[Localisation, bool]:
     """Where the base fit's residual departs from noise, and whether the test rejects it."""
-    loc = locate_mismatch(before.test, before.residual, before.t, before.u, rate=1.0 / windows.dt)
+    loc = locate_mismatch(before.test, before.residual, before.t, before.u, rate=1.0 / compared_dt(windows))
     detected = bool(before.test.p_value < s.alpha)
     say(f"misspecification p = {before.test.p_value:.4f} -> {'detected' if detected else 'not detected'}")
     return loc, detected
 
 
-def _held_out_predictions(fitter: Fitter, windows: Windows, base: FitResult, decision: _Decision) -> dict:
-    """Whole-window predictions of the base and the chosen model, (W, T, 6) each."""
-    full = windows.fit_data("valid", truncate=False)
+def _held_out_predictions(fitter: Fitter, windows: Problem, base: FitResult, decision: _Decision) -> dict:
+    """Whole-window predictions of the base and the chosen model, (W, K, 6) each."""
+    full = fit_data(windows, "valid", truncate=False)
     before = fitter.predict(base.z, (), full)
     after = fitter.predict(decision.final.z, decision.chosen, full) if decision.chosen else before
     return {"before": before, "after": after}

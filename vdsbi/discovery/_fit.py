@@ -35,12 +35,14 @@ from ..simulator import (
     CHANNELS,
     EFFECTS,
     PARAM_NAMES,
+    Decimator,
     Inputs,
     Solver,
     Vehicle,
     VehicleModel,
     make_model,
     solve,
+    steady_lateral_state,
 )
 from ._candidates import EffectSpace, effect_space
 
@@ -51,24 +53,27 @@ V0_PRIOR_STD = 1.0
 MAX_Z_STEP = 2.0
 
 
-def super_model(vehicle: Vehicle, effects: EffectSpace) -> VehicleModel:
+def super_model(vehicle: Vehicle, effects: EffectSpace, longitudinal: str = "torque") -> VehicleModel:
     """All candidate effects, in registry order. At their null values they vanish exactly
     (the lags' states are frozen and bypassed at τ = 0, so nothing stiff remains and a 5 ms
     RK4 step is stable; τ is bounded below by 5 ms when fitted: |λ|·h ≤ 1.2)."""
-    return make_model(vehicle, effects.names)
+    return make_model(vehicle, effects.names, longitudinal=longitudinal)
 
 
 class FitData(eqx.Module):
-    """What the fit conditions on: W equal-length windows of a recording.
+    """What the fit conditions on: W equal-length windows of a problem (`vdsbi.problem`).
 
     Attributes:
-        inputs: driver inputs, each leaf stacked over windows (W, T).
-        measured: (W, T, C) measured channels.
-        sigma: (C,) additive noise std per channel, channel units.
-        mask: (W, T) 1 where a sample enters the fit, else 0.
+        inputs: driver inputs, each leaf stacked over windows (W, T) at the model rate.
+        measured: (W, K, C) measured channels at the compared samples.
+        sigma: (C,) noise std of the compared samples, channel units.
+        mask: (W, K) 1 where a sample enters the fit, else 0.
         v0_meas: (W,) measured initial speed per window, m/s.
+        r0: (W,) measured initial yaw rate per window (with θ: the initial lateral state).
+        decimator: the filter shared with the measurement, or None (compared = model rate).
         channel_index: indices of the measured channels in `CHANNELS` (static).
         channels: their names (static).
+        longitudinal: "torque" or "speed" (static).
     """
 
     inputs: Inputs
@@ -76,8 +81,11 @@ class FitData(eqx.Module):
     sigma: jax.Array
     mask: jax.Array
     v0_meas: jax.Array
+    r0: jax.Array
+    decimator: Decimator | None
     channel_index: tuple[int, ...] = eqx.field(static=True)
     channels: tuple[str, ...] = eqx.field(static=True)
+    longitudinal: str = eqx.field(static=True, default="torque")
 
     @property
     def num_windows(self) -> int:
@@ -120,15 +128,18 @@ def make_space(vehicle: Vehicle, effects: EffectSpace) -> Space:
 
 
 def _predict(model, space, data: FitData, z, active, solver):
-    """(W, T, 6) readings for every window."""
+    """(W, K, 6) readings of every window at the compared samples; each window starts from its
+    measured speed and yaw rate with the steady-state side speed under θ."""
     zt, zv, ze = space.split(z, data.num_windows)
     theta = space.theta(zt)
     ep = space.effects(ze, active)
 
-    def one(inputs, v0):
-        return solve(model, theta, inputs, v0, ep, solver)[0]
+    def one(inputs, v0, r0):
+        lateral0 = jnp.stack(steady_lateral_state(theta, model.vehicle, v0, r0))
+        ys = solve(model, theta, inputs, v0, ep, solver, lateral0=lateral0)[0]
+        return ys if data.decimator is None else data.decimator(ys)
 
-    return jax.vmap(one)(data.inputs, data.v0_meas + zv)
+    return jax.vmap(one)(data.inputs, data.v0_meas + zv, data.r0)
 
 
 def _whitened(model, space, data, z, active, solver):
@@ -218,7 +229,7 @@ class Fitter:
     ):
         self.vehicle = vehicle
         self.effects = effect_space() if effects is None else effects
-        self.model = super_model(vehicle, self.effects)
+        self.model = super_model(vehicle, self.effects, data.longitudinal)
         self.space = make_space(vehicle, self.effects)
         self.data = data
         self.dt = float(dt)

@@ -10,9 +10,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..diagnostics import Localisation, MisspecificationTest
+from ..problem import Problem
 from ..simulator import CHANNELS, EFFECTS, PARAM_NAMES
 from ._candidates import all_pairs, label
-from ._data import Windows
+from ._data import compared_dt, held_out_from
 from ._fit import FitResult, Fitter
 from ._rank import PAIR_LOG_PRIOR, STRONG, Ranked, verdict
 
@@ -23,7 +24,7 @@ if TYPE_CHECKING:  # annotations only (_diagnose imports this module)
 REQUIRED_KEYS = ("mismatch_detected", "p_value", "located", "effects", "chosen", "fit", "theta")
 
 
-def _held_metrics(pred: np.ndarray, windows: Windows) -> dict:
+def _held_metrics(pred: np.ndarray, windows: Problem) -> dict:
     """Per channel on the held-out samples: NRMSE (RMS error / std of the measurement) and
     χ²/dof (mean squared whitened error; no parameters were fitted on these samples)."""
     out = {}
@@ -124,7 +125,7 @@ def build_report(
         "noise": {
             "model": "additive white Gaussian per channel",
             "sigma": {c: float(x) for c, x in zip(windows.channels, windows.sigma)},
-            "source": windows.sigma_source,
+            "source": windows.noise_source,
         },
         "windows": _window_spans(windows, s.train_fraction),
         "channels": list(windows.channels),
@@ -149,7 +150,7 @@ def _pairs_skipped(s: DiagnoseSettings, names: Sequence[str], pairs: Sequence[tu
     return text + ("" if s.candidates is None else f"; only {sorted(names)} were considered")
 
 
-def _located(loc: Localisation, test: MisspecificationTest, windows: Windows) -> dict:
+def _located(loc: Localisation, test: MisspecificationTest, windows: Problem) -> dict:
     return {
         "channels": loc.channels,
         "windows": loc.windows,
@@ -164,13 +165,13 @@ def _located(loc: Localisation, test: MisspecificationTest, windows: Windows) ->
     }
 
 
-def _window_spans(windows: Windows, train_fraction: float) -> dict:
+def _window_spans(windows: Problem, train_fraction: float) -> dict:
     return {
         "spans_s": [
-            [float(windows.t[w, 0]), float(windows.t[w][windows.valid[w]][-1])]
+            [float(windows.t_out[w, 0]), float(windows.t_out[w][windows.valid[w]][-1])]
             for w in range(windows.num_windows)
         ],
-        "held_out_from_s": windows.t_train_end.tolist(),
+        "held_out_from_s": held_out_from(windows),
         "train_fraction": train_fraction,
     }
 
@@ -302,7 +303,8 @@ def write_plots(result, out: Path) -> None:
     # Residual heat map: channel × time, low-passed whitened residual of the base fit.
     res = result.residual_stretches["before"]
     ts = result.residual_stretches["t"]
-    m = max(1, int(round(0.25 / win.dt)))
+    dt = compared_dt(win)
+    m = max(1, int(round(0.25 / dt)))
     kern = np.ones(m) / m
     sm = np.stack(
         [
@@ -310,7 +312,9 @@ def write_plots(result, out: Path) -> None:
             for w in range(res.shape[0])
         ]
     )
-    fig, axes = plt.subplots(1, res.shape[0], figsize=(10, 0.5 * len(chans) + 2), squeeze=False)
+    fig, axes = plt.subplots(
+        1, res.shape[0], figsize=(max(10, 1.2 * res.shape[0]), 0.5 * len(chans) + 2), squeeze=False
+    )
     vmax = max(3.0, float(np.percentile(np.abs(sm), 99)))
     for w in range(res.shape[0]):
         ax = axes[0, w]
@@ -336,13 +340,15 @@ def write_plots(result, out: Path) -> None:
         k = CHANNELS.index(name)
         for w in range(win.num_windows):
             v = win.valid[w]
-            ax.plot(win.t[w][v], win.y[w, v, c], color="0.6", lw=0.6, label="measured" if w == 0 else None)
-            ax.plot(win.t[w][v], p0[w, v, k], color="C3", lw=1, label="before" if w == 0 else None)
-            ax.plot(win.t[w][v], p1[w, v, k], color="C0", lw=1, label="after" if w == 0 else None)
-            ax.axvline(win.t_train_end[w], color="k", ls=":", lw=0.8)
+            t = win.t_out[w]
+            ax.plot(t[v], win.y[w, v, c], color="0.6", lw=0.6, label="measured" if w == 0 else None)
+            ax.plot(t[v], p0[w, v, k], color="C3", lw=1, label="before" if w == 0 else None)
+            ax.plot(t[v], p1[w, v, k], color="C0", lw=1, label="after" if w == 0 else None)
+            if win.held[w].any():
+                ax.axvspan(t[win.held[w]].min(), t[win.held[w]].max(), color="0.92", zorder=0)
         ax.set_ylabel(name)
     axes[0, 0].legend(loc="upper right", fontsize=7, ncol=3)
-    axes[-1, 0].set_xlabel("t [s] (dotted: held-out part starts)")
+    axes[-1, 0].set_xlabel("t [s] (grey: held out)")
     fig.savefig(out / "overlay.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
     # Residual spectra before/after.
@@ -350,7 +356,7 @@ def write_plots(result, out: Path) -> None:
     for key, col in (("before", "C3"), ("after", "C0")):
         r = result.residual_stretches[key]
         spec = (np.abs(np.fft.rfft(r, axis=1)) ** 2 / r.shape[1]).mean(0)
-        f = np.fft.rfftfreq(r.shape[1], win.dt)
+        f = np.fft.rfftfreq(r.shape[1], dt)
         for c, name in enumerate(chans):
             axes[c, 0].loglog(f[1:], spec[1:, c], color=col, lw=0.7, label=key)
             axes[c, 0].set_ylabel(name)

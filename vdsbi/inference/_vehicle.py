@@ -8,8 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from ..io import InputError
-from ..io._errors import SimulationError
+from ..io import InputError, SimulationError
 from ..simulator import PARAM_NAMES, StochasticSimulator
 from ._apt import APTState, NPEConfig, apt
 from ._cnn import CNNEmbedding
@@ -140,13 +139,46 @@ def identify(
     obs = jax.jit(jax.vmap(lambda r: observation(r, u, settings.embedding)))
     x_o = obs(readings_o[None])[0]
 
+    def simulate(k, theta):
+        ys, ok = simulator(k, jnp.asarray(theta, jnp.float32))
+        return obs(ys), ok
+
+    return fit_posterior(
+        key,
+        simulate,
+        prior,
+        x_o,
+        settings,
+        on_round_end=on_round_end,
+        on_epoch_end=on_epoch_end,
+        on_simulate=on_simulate,
+        state=state,
+    )
+
+
+def fit_posterior(
+    key: PRNGKeyArray,
+    simulate: Callable,
+    prior: BoxPrior,
+    x_o,
+    settings: IdentifySettings,
+    *,
+    on_round_end: Callable[[APTState], None] | None = None,
+    on_epoch_end: Callable | None = None,
+    on_simulate: Callable[[int], None] | None = None,
+    state: APTState | None = None,
+) -> tuple[Posterior, np.ndarray, APTState]:
+    """APT with `settings`' embedding and budget on `simulate(key, θ) -> (x, ok)` at `x_o`.
+
+    Raises:
+        SimulationError: fewer than `MIN_USABLE_SIMULATIONS` usable simulations after a round.
+    """
     usable = [0 if state is None else int(state.x.shape[0])]
 
-    def simulate(k, theta):
+    def guarded(k, theta):
         if on_simulate is not None:
             on_simulate(theta.shape[0])
-        ys, ok = simulator(k, jnp.asarray(theta, jnp.float32))
-        x = obs(ys)
+        x, ok = simulate(k, theta)
         finite = np.all(np.isfinite(np.asarray(x).reshape(x.shape[0], -1)), axis=1)
         usable[0] += int(np.sum(np.asarray(ok) & finite))
         if usable[0] < MIN_USABLE_SIMULATIONS:
@@ -157,7 +189,7 @@ def identify(
     embedding = make_embedding(k_emb, x_o.shape, settings)
     posterior, state = apt(
         k_apt,
-        simulate,
+        guarded,
         prior,
         x_o,
         embedding=embedding,

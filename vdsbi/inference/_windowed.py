@@ -9,12 +9,12 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from ..problem import Problem, simulate_draws, windowed_model
+from ..problem import Problem, simulate_draws, split_parameters, windowed_model
 from ..simulator import Solver
-from ._apt import APTState, apt
+from ._apt import APTState
 from ._posterior import Posterior
 from ._prior import BoxPrior
-from ._vehicle import IdentifySettings, make_embedding, observation
+from ._vehicle import IdentifySettings, fit_posterior, observation
 
 
 def input_channels(problem: Problem) -> Float[Array, "W K I"]:
@@ -50,12 +50,15 @@ def identify_problem(
 ) -> tuple[Posterior, np.ndarray, APTState]:
     """Posterior over θ from the training part of `problem` (all its windows at once).
 
+    With `effects`, their parameters join θ (after the six, in `parameter_names` order) and
+    `prior` must span them too.
+
     Simulated draws get white sensor noise at the model rate and then the problem's filter,
     as the measurement does; in torque mode each window's initial speed is jittered by the
     uncertainty of its measured value. The held-out part is not seen.
 
     Returns:
-        (posterior at the observation, (num_samples, 6) samples, final APT state).
+        (posterior at the observation, (num_samples, 6 + P) samples, final APT state).
     """
     train = problem.select("train")
     wm = windowed_model(train, effects, solver)
@@ -66,26 +69,18 @@ def identify_problem(
     jitter = 0.0 if train.longitudinal == "speed" else 0.2 + 0.02 * float(np.mean(train.v0))
 
     def simulate(k, theta):
-        if on_simulate is not None:
-            on_simulate(theta.shape[0])
-        ys, ok = simulate_draws(k, wm, jnp.asarray(theta), sigma_raw=train.sigma_raw, v0_jitter=jitter)
+        th, ep = split_parameters(theta, effects)
+        ys, ok = simulate_draws(k, wm, th, sigma_raw=train.sigma_raw, v0_jitter=jitter, effect_params=ep)
         return to_x(flatten_windows(ys, mask).astype(jnp.float32)), ok
 
-    k_emb, k_apt, k_s = jax.random.split(key, 3)
-    embedding = make_embedding(k_emb, x_o.shape, settings)
-    posterior, state = apt(
-        k_apt,
+    return fit_posterior(
+        key,
         simulate,
         prior,
         x_o,
-        embedding=embedding,
-        rounds=settings.rounds,
-        sims_per_round=settings.sims_per_round,
-        config=settings.npe_config,
-        truncate=settings.truncate,
+        settings,
         on_round_end=on_round_end,
         on_epoch_end=on_epoch_end,
+        on_simulate=on_simulate,
         state=state,
     )
-    samples = np.asarray(posterior.sample(k_s, settings.num_samples))
-    return posterior, samples, state

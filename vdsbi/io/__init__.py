@@ -15,7 +15,7 @@ from ._drive import (
     load_drive as load_drive,
     read_recording as read_recording,
 )
-from ._errors import InputError as InputError
+from ._errors import InputError as InputError, SimulationError as SimulationError
 from ._parquet import read_parquet as read_parquet
 from ._recording import (
     LIMITS as LIMITS,

@@ -1,10 +1,17 @@
 """A recording plus a vehicle as one problem: windows, channels, noise, inputs, initial states, held-out."""
 
 from ._noise import dof_factor as dof_factor, lag1_autocorrelation as lag1_autocorrelation
+from ._parameters import (
+    parameter_names as parameter_names,
+    parameter_units as parameter_units,
+    prior_box as prior_box,
+    split_parameters as split_parameters,
+)
 from ._problem import (
     LONGITUDINAL_MODES as LONGITUDINAL_MODES,
     Problem as Problem,
     ProblemSettings as ProblemSettings,
+    grip_used as grip_used,
     make_problem as make_problem,
 )
 from ._simulate import (

@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..io import InputError, Recording
-from ..simulator import CHANNELS, Decimator, Inputs, Vehicle
+from ..simulator import CHANNELS, GRAVITY, Decimator, Inputs, Vehicle
 from ._noise import raw_noise_std
 from ._windows import Window, choose_windows
 
@@ -413,3 +413,19 @@ def _restrict(rec: Recording, segment: tuple[float, float]) -> Recording:
             f"[{t0}, {t1}] s is not inside the recording [{rec.t[0]:.3f}, {rec.t[-1]:.3f}] s",
         )
     return rec.slice(t0, t1)
+
+
+def grip_used(problem: Problem) -> float | None:
+    """How much of the grip μ·g the drive uses: the 99th percentile of |a_y| over the compared
+    samples (the filtered ay channel, else speed × yaw rate) over vehicle.json's μ·g; None
+    without a lateral channel. Above 0.5 Dugoff's tyre leaves its linear range."""
+    mask = problem.train | problem.held
+    if "ay" in problem.channels:
+        lateral = problem.y[..., problem.channels.index("ay")][mask]
+    elif "yaw_rate" in problem.channels and problem.speed is not None:
+        factor = 1 if problem.decimator is None else problem.decimator.factor
+        speed = problem.speed[:, ::factor]
+        lateral = (problem.y[..., problem.channels.index("yaw_rate")] * speed)[mask]
+    else:
+        return None
+    return float(np.quantile(np.abs(lateral), 0.99) / (problem.vehicle.friction * GRAVITY))

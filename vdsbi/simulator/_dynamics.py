@@ -93,12 +93,13 @@ class VehicleModel(eqx.Module):
             i += e.num_states
         return out
 
-    def friction(self, effect_params) -> Float[Array, ""]:
-        """Road friction μ: vehicle.json's value times the effects' friction factors."""
-        scale = jnp.asarray(1.0)
+    def friction(self, effect_params) -> tuple[Float[Array, ""], Float[Array, ""]]:
+        """Friction μ of the front and rear tyres: vehicle.json's μ times the effects' factors."""
+        front, rear = jnp.asarray(1.0), jnp.asarray(1.0)
         for e, p in zip(self.effects, effect_params):
-            scale = scale * e.friction_scale(p)
-        return self.vehicle.friction * scale
+            f, r = e.friction_scale(p)
+            front, rear = front * f, rear * r
+        return self.vehicle.friction * front, self.vehicle.friction * rear
 
     def radius(self, effect_params) -> Float[Array, ""]:
         scale = jnp.asarray(1.0)
@@ -183,7 +184,8 @@ class VehicleModel(eqx.Module):
             return self._evaluate_speed(t, y, args)
         theta, effect_params, inputs = args
         veh = self.vehicle
-        m, L, mu = veh.mass, veh.wheelbase, self.friction(effect_params)
+        m, L = veh.mass, veh.wheelbase
+        mu_f, mu_r = self.friction(effect_params)
         vx, vy, r, wf, wr, a_f_hat, a_r_hat, k_f_hat, k_r_hat = (y[i] for i in range(9))
         zs = self._effect_states(y)
         u_cmd = inputs(t)
@@ -231,8 +233,8 @@ class VehicleModel(eqx.Module):
             # under acceleration).
             fz_f = fz_f0 - m * h * a_x / L
             fz_r = fz_r0 + m * h * a_x / L
-            fx_f, fy_f = dugoff_with_load(demand_f, fz_f, mu)
-            fx_r, fy_r = dugoff_with_load(demand_r, fz_r, mu)
+            fx_f, fy_f = dugoff_with_load(demand_f, fz_f, mu_f)
+            fx_r, fy_r = dugoff_with_load(demand_r, fz_r, mu_r)
             a_x_new = (fx_f * cos_d - fy_f * sin_d + fx_r + fbx) / m
             return a_x_new, (fz_f, fz_r, fx_f, fy_f, fx_r, fy_r)
 
@@ -304,7 +306,8 @@ class VehicleModel(eqx.Module):
         # Speed mode (see the class docstring): Vx and a_x are measured, κ = 0, no wheel torques.
         theta, effect_params, inputs = args
         veh = self.vehicle
-        m, L, mu = veh.mass, veh.wheelbase, self.friction(effect_params)
+        m, L = veh.mass, veh.wheelbase
+        mu_f, mu_r = self.friction(effect_params)
         vy, r, a_f_hat, a_r_hat = y[1], y[2], y[5], y[6]
         vx, dvx, a_x = inputs.longitudinal(t)
         zs = self._effect_states(y)
@@ -345,8 +348,8 @@ class VehicleModel(eqx.Module):
 
         cos_d, sin_d = jnp.cos(delta), jnp.sin(delta)
         # κ = 0 as a constant (not the κ̂ states), so C_kappa_* have an exactly zero gradient.
-        fx_f, fy_f = dugoff_with_load(dugoff_demand(theta[2], caf, zero, a_f_hat), fz_f, mu)
-        fx_r, fy_r = dugoff_with_load(dugoff_demand(theta[3], car, zero, a_r_hat), fz_r, mu)
+        fx_f, fy_f = dugoff_with_load(dugoff_demand(theta[2], caf, zero, a_f_hat), fz_f, mu_f)
+        fx_r, fy_r = dugoff_with_load(dugoff_demand(theta[3], car, zero, a_r_hat), fz_r, mu_r)
         a_y = (fx_f * sin_d + fy_f * cos_d + fy_r + fby) / m
 
         vx_pos = jnp.maximum(vx, V_FLOOR)

@@ -65,9 +65,9 @@ class AbstractEffect(eqx.Module):
         """Effective (steer, torque_front, torque_rear) acting on the vehicle."""
         return u
 
-    def friction_scale(self, p) -> Float[Array, ""]:
-        """Factor on the road friction coefficient μ."""
-        return jnp.asarray(1.0)
+    def friction_scale(self, p) -> tuple[Float[Array, ""], Float[Array, ""]]:
+        """Factors on the friction coefficient μ of the front and rear tyres."""
+        return jnp.asarray(1.0), jnp.asarray(1.0)
 
     def radius_scale(self, p) -> Float[Array, ""]:
         """Factor on the free tire radius."""

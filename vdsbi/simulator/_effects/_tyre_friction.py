@@ -2,20 +2,22 @@ from ._base import AbstractEffect
 
 
 class TyreFriction(AbstractEffect):
-    """Road–tyre friction μ·s instead of vehicle.json's μ (a data-sheet guess is rarely right).
+    """Tyre–road friction μ·s_f (front) and μ·s_r (rear) instead of vehicle.json's μ.
 
-    Dugoff's force saturates at μ·F_z and departs from linear at half of it, so the factor is
-    informed only where the drive uses more than about half the grip (|a_y| ≳ μg/2).
+    A data-sheet μ is rarely right, and the axles differ (tyres, camber, load sensitivity): the
+    front/rear balance of grip decides whether the car under- or oversteers at the limit.
+    Dugoff's force saturates at μ·F_z and departs from linear at half of it, so the factors
+    are informed only where the drive uses more than about half the grip (|a_y| ≳ μg/2).
     """
 
     name = "tyre_friction"
-    param_names = ("scale",)
-    units = ("-",)
-    null = (1.0,)
-    typical = ((0.8, 1.25),)
-    bounds = ((0.4, 1.8),)
-    start = (1.0,)
+    param_names = ("scale_front", "scale_rear")
+    units = ("-", "-")
+    null = (1.0, 1.0)
+    typical = ((0.8, 1.3), (0.8, 1.3))
+    bounds = ((0.4, 1.8), (0.4, 1.8))
+    start = (1.0, 1.0)
     description = "road friction differs from vehicle.json's (saturation at the limit of adhesion)"
 
     def friction_scale(self, p):
-        return p[0]
+        return p[0], p[1]

@@ -1,0 +1,46 @@
+"""θ extended by the parameters of enabled effects: names, prior box, and the split back."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import jax.numpy as jnp
+
+from ..simulator import PARAM_NAMES, PARAM_UNITS, Vehicle, get_effect
+
+
+def parameter_names(effects: Sequence[str] = ()) -> tuple[str, ...]:
+    """PARAM_NAMES, then ``effect.param`` for each parameter of each effect."""
+    extra = [f"{e}.{p}" for e in effects for p in get_effect(e).param_names]
+    return (*PARAM_NAMES, *extra)
+
+
+def parameter_units(effects: Sequence[str] = ()) -> dict[str, str]:
+    out = dict(PARAM_UNITS)
+    for e in effects:
+        eff = get_effect(e)
+        out |= {f"{e}.{p}": u for p, u in zip(eff.param_names, eff.units)}
+    return out
+
+
+def prior_box(vehicle: Vehicle, effects: Sequence[str] = ()) -> dict[str, tuple[float, float]]:
+    """Uniform prior box: the vehicle's θ box, then each effect parameter's typical range;
+    vehicle.json's `prior` may override any of them by its full name (``tyre_friction.scale``)."""
+    box = dict(vehicle.default_prior())
+    for e in effects:
+        eff = get_effect(e)
+        for p, rng in zip(eff.param_names, eff.typical):
+            name = f"{e}.{p}"
+            box[name] = tuple(float(v) for v in vehicle.prior.get(name, rng))
+    return box
+
+
+def split_parameters(theta_ext, effects: Sequence[str] = ()) -> tuple:
+    """(…, 6 + P) -> (θ (…, 6), one (…, P_e) array per effect)."""
+    theta_ext = jnp.asarray(theta_ext)
+    out, i = [], len(PARAM_NAMES)
+    for e in effects:
+        n = len(get_effect(e).param_names)
+        out.append(theta_ext[..., i : i + n])
+        i += n
+    return theta_ext[..., : len(PARAM_NAMES)], tuple(out)
