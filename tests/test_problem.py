@@ -94,7 +94,7 @@ def test_truth_predicts_every_window_even_mid_corner(x64, long_drive):
     # each window (train and held-out) to the noise level; a window started laterally at rest
     # (the old assumption) would not (checked below by zeroing the measured yaw rate).
     rec, vehicle = long_drive
-    prob = make_problem(rec, vehicle, ProblemSettings(max_window=5.0, burn_in=0.0))
+    prob = make_problem(rec, vehicle, ProblemSettings(max_window=5.0, burn_in=0.0, quiet_edges=False))
     assert np.all(np.abs(prob.r0[1:]) > 0.05)  # really mid-corner
     pred, ok = predict(prob, THETA)
     assert ok
@@ -156,3 +156,18 @@ def test_correlated_residuals_count_as_fewer_samples():
     rho = lag1_autocorrelation(np.stack([e, ar], -1), np.ones((4, 5000), bool))
     assert rho[0] == pytest.approx(0.0, abs=0.03) and rho[1] == pytest.approx(0.8, abs=0.03)
     assert dof_factor(rho)[1] == pytest.approx(0.2 / 1.8, rel=0.15)
+
+
+def test_window_starts_move_to_quiet_moments():
+    # A weave with straight moments: windows start near them rather than mid-corner.
+    t = np.arange(0.0, 40.0, 0.005)
+    steer = 0.03 * np.sin(2 * np.pi * t / 8.0)
+    inputs = Inputs(0.0, 0.005, steer, np.full_like(t, 90.0), np.full_like(t, 60.0))
+    rec, vehicle = _recording(inputs, v0=15.0, noise=0.02)
+    quiet = make_problem(rec, vehicle, ProblemSettings(max_window=6.0))
+    plain = make_problem(rec, vehicle, ProblemSettings(max_window=6.0, quiet_edges=False))
+    assert np.mean(np.abs(quiet.r0[1:])) < 0.5 * np.mean(np.abs(plain.r0[1:]))
+    # Still contiguous; each edge moved by at most 30 % of a window, none shorter than half of one.
+    spans = [(w.t0, w.t1) for w in quiet.windows]
+    assert all(abs(b0 - a1) < 1e-9 for (_, a1), (b0, _) in zip(spans, spans[1:]))
+    assert all(3.0 - 1e-9 <= b - a <= 1.6 * 6.0 + 1e-9 for a, b in spans[1:-1])

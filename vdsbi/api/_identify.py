@@ -192,9 +192,10 @@ def _problem(rec, veh, longitudinal: str, segment, max_duration: float | None, b
         raise InputError("settings", "--longitudinal", f"must be auto, torque or speed, got {longitudinal!r}")
     speed = longitudinal == "speed" or (longitudinal == "auto" and not rec.has_torques)
     window = max_duration if max_duration is not None else (10.0 if speed else 20.0)
-    return make_problem(
-        rec, veh, ProblemSettings(longitudinal=longitudinal, max_window=window, segment=segment)
+    settings = ProblemSettings(
+        longitudinal=longitudinal, max_window=window, segment=segment, bandwidth=bandwidth
     )
+    return make_problem(rec, veh, settings)
 
 
 def _effects(prob: Problem, effects, say) -> tuple[str, ...]:

@@ -48,6 +48,8 @@ class ProblemSettings:
         output_rate: rate after decimation, Hz (when filtering).
         segment: a user's [t0, t1] s to restrict the drive to, or None.
         channels: channels to condition on (default: every measured channel the mode allows).
+        quiet_edges: start windows at the quietest nearby moment (near straight running), where
+            the steady-state initial lateral state is accurate.
     """
 
     longitudinal: str = "auto"
@@ -60,6 +62,7 @@ class ProblemSettings:
     output_rate: float = 25.0
     segment: tuple[float, float] | None = None
     channels: tuple[str, ...] | None = None
+    quiet_edges: bool = True
 
     def __post_init__(self):
         if self.longitudinal not in (*LONGITUDINAL_MODES, "auto"):
@@ -367,6 +370,7 @@ def make_problem(rec: Recording, vehicle: Vehicle, settings: ProblemSettings = P
         held_out=settings.held_out,
         min_windows_to_split=settings.min_windows_to_split,
         max_windows=settings.max_windows,
+        quiet_edges=settings.quiet_edges,
     )
     idx, t, u, speed, accel, v0, r0, lengths = _window_arrays(rec, windows, mode, vehicle)
     decimator = _decimator(rec, mode, settings)

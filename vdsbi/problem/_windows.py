@@ -41,6 +41,45 @@ def _pieces(stretches: list[tuple[float, float]], max_window: float) -> list[tup
     return out
 
 
+#: Window edges move by at most this fraction of the window length to a quieter moment.
+EDGE_SEARCH = 0.3
+
+
+def lateral_activity(rec: Recording, wheel_radius: float) -> np.ndarray | None:
+    """(T,) how far from straight running the car is, in m/s²: |a_y| and |v_x·r| smoothed over
+    0.5 s, whichever is larger; None without ay and yaw rate."""
+    n = max(1, int(round(0.5 * rec.rate)))
+    smooth = lambda x: np.convolve(np.pad(x, (n // 2, n - 1 - n // 2), mode="edge"), np.ones(n) / n, "valid")
+    parts = []
+    if "ay" in rec.channels:
+        parts.append(np.abs(smooth(rec.channels["ay"])))
+    speed = rec.speed(wheel_radius)
+    if "yaw_rate" in rec.channels and speed is not None:
+        parts.append(np.abs(smooth(rec.channels["yaw_rate"] * speed)))
+    return np.maximum.reduce(parts) if parts else None
+
+
+def _quiet_edges(rec: Recording, pieces, activity: np.ndarray, max_window: float):
+    """Move each window start (and the matching end) to the quietest moment within
+    ±EDGE_SEARCH·max_window: a window starting near straight running has a well-estimated
+    initial lateral state (a drift or a counter-steer at the start is not steady)."""
+    out = [list(p) for p in pieces]
+    reach = EDGE_SEARCH * max_window
+    for k in range(len(out)):
+        a, b = out[k]
+        joined = k > 0 and abs(out[k - 1][1] - a) < 1e-9
+        lo = max(a - reach, out[k - 1][0] + 0.5 * max_window) if joined else a
+        hi = min(a + reach, b - 0.5 * max_window)
+        if hi <= lo:
+            continue
+        sel = (rec.t >= lo) & (rec.t <= hi)
+        t_new = float(rec.t[sel][np.argmin(activity[sel])])
+        out[k][0] = t_new
+        if joined:
+            out[k - 1][1] = t_new
+    return [(a, b) for a, b in out]
+
+
 def choose_windows(
     rec: Recording,
     *,
@@ -50,11 +89,13 @@ def choose_windows(
     held_out: float,
     min_windows_to_split: int,
     max_windows: int | None,
+    quiet_edges: bool = True,
 ) -> tuple[list[Window], dict]:
     """Windows over every usable stretch of `rec`, and why.
 
     The usable driving (`vdsbi.io.find_segments`: moving and excited) is cut into windows of at
-    most `max_window` s. With at least `min_windows_to_split` windows, those whose start lies in
+    most `max_window` s, each edge moved to the quietest nearby moment (`quiet_edges`). With
+    at least `min_windows_to_split` windows, those whose start lies in
     the last `held_out` fraction of the usable driving time are held out whole (validation on
     driving the fit never saw); a shorter drive keeps its windows and holds out the last
     `held_out` fraction of each. With `max_windows`, the longest windows are kept (ties by time).
@@ -73,6 +114,9 @@ def choose_windows(
         usable = [(float(rec.t[0]), float(rec.t[-1]))]
         described["how"] = "no usable stretch found: the whole recording"
     pieces = _pieces(usable, max_window)
+    activity = lateral_activity(rec, wheel_radius) if quiet_edges else None
+    if activity is not None:
+        pieces = _quiet_edges(rec, pieces, activity, max_window)
     if max_windows is not None and len(pieces) > max_windows:
         pieces = sorted(sorted(pieces, key=lambda p: (-(p[1] - p[0]), p[0]))[:max_windows])
     if len(pieces) >= min_windows_to_split:

@@ -1,0 +1,71 @@
+"""What a drive can and cannot tell: the Fisher-information flag, and `simulate --inputs` in the
+speed-driven mode predicting a recording from its own initial state."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from vdsbi.cli import main
+from vdsbi.diagnostics import identifiability
+from vdsbi.io import build_recording, read_recording
+from vdsbi.problem import ProblemSettings, make_problem
+from vdsbi.simulator import CHANNELS, SEED_TRUE_THETA, Inputs, default_vehicle, simulate, theta_from_dict
+
+THETA = theta_from_dict(SEED_TRUE_THETA)
+
+
+def _drive(steer_amplitude: float, duration: float = 30.0, dt: float = 0.005, noise: float = 0.02):
+    """A torque-free recording (speed, steer, IMU) of a weaving drive at ≈ 15 m/s."""
+    t = np.arange(0.0, duration, dt)
+    steer = steer_amplitude * np.sin(2 * np.pi * t / 3.0) * np.sin(2 * np.pi * t / 17.0)
+    torque = 150.0 + 80.0 * np.sin(2 * np.pi * t / 6.0)
+    inputs = Inputs(0.0, dt, steer, 0.6 * torque, 0.4 * torque)
+    vehicle = default_vehicle()
+    ys, ok = simulate(THETA, inputs, vehicle, v0=15.0)
+    assert ok
+    rng = np.random.default_rng(0)
+    cols = {"t": t, "steer": steer}
+    for i, c in enumerate(CHANNELS):
+        cols[c] = ys[:, i] + rng.normal(0.0, noise * (0.05 if c == "vx" else 1.0), len(t))
+    return build_recording(cols, "torque-free.csv"), vehicle
+
+
+def test_slip_stiffness_is_not_identified_without_torques_and_cornering_stiffness_is(x64):
+    rec, vehicle = _drive(0.03)
+    problem = make_problem(rec, vehicle, ProblemSettings(longitudinal="speed", max_window=10.0))
+    info = identifiability(problem, THETA, vehicle.default_prior())
+    for name in ("C_kappa_f", "C_kappa_r"):
+        assert not info[name]["identified"] and "zero information" in info[name]["reason"]
+        assert info[name]["posterior_std"] == pytest.approx(info[name]["prior_std"])
+    for name in ("C_alpha_f", "C_alpha_r"):
+        assert info[name]["identified"], info[name]
+        assert info[name]["posterior_std"] < 0.2 * info[name]["prior_std"]
+
+
+def test_cog_height_is_not_identified_in_the_linear_tyre_range(x64):
+    # |ay| stays far below μg/2: Dugoff is linear, so the load transfer h_cog drives changes nothing.
+    rec, vehicle = _drive(0.004)
+    problem = make_problem(rec, vehicle, ProblemSettings(longitudinal="speed", max_window=10.0))
+    info = identifiability(problem, THETA, vehicle.default_prior())
+    assert not info["h_cog"]["identified"]
+    assert info["h_cog"]["ratio"] > 0.5
+
+
+def test_simulate_predicts_a_torque_free_recording_from_its_own_state(tmp_path):
+    rec, vehicle = _drive(0.03, duration=12.0)
+    rec_path, veh_path, out = tmp_path / "rec.csv", tmp_path / "vehicle.json", tmp_path / "pred.csv"
+    rec.to_csv(rec_path)
+    veh_path.write_text(__import__("json").dumps(vehicle.to_dict()))
+    theta = __import__("json").dumps(SEED_TRUE_THETA)
+    args = ["simulate", "--vehicle", str(veh_path), "--inputs", str(rec_path), "--theta", theta]
+    args += ["--noise", "none"]
+    assert main([*args, "--out", str(out)]) == 0
+    pred = pd.read_csv(out)
+    measured = read_recording(rec_path)
+    # Speed mode by default (no torque columns): vx is the measurement itself, the lateral
+    # channels are predicted from the recording's initial speed and yaw rate.
+    np.testing.assert_allclose(pred["vx"], measured.channels["vx"], atol=1e-6)
+    for c in ("ay", "yaw_rate"):
+        err = pred[c].to_numpy() - measured.channels[c]
+        # The recording's own sensor noise (0.02) plus a few per cent of the signal.
+        assert np.sqrt(np.mean(err**2)) < 0.02 * 1.2 + 0.03 * np.std(measured.channels[c]), c
