@@ -9,7 +9,14 @@ import pytest
 
 from vdsbi.cli import main
 from vdsbi.io import read_recording, read_vehicle
-from vdsbi.simulator import CHANNELS, PARAM_NAMES, SEED_TRUE_THETA, seed_profile, simulate
+from vdsbi.simulator import (
+    CHANNELS,
+    PARAM_NAMES,
+    SEED_TRUE_THETA,
+    seed_profile,
+    simulate,
+    steady_lateral_state,
+)
 
 GOOD = Path(__file__).parent / "data" / "good"
 VEHICLE = str(GOOD / "vehicle.json")
@@ -50,13 +57,19 @@ def test_recording_inputs_theta_file_effects_and_noise(tmp_path):
     # v0 from the recording's vx; the noise is the vehicle's additive noise on ax, ay, yaw_rate
     vehicle = read_vehicle(VEHICLE)
     theta = np.array([1.2, 0.5, 1e5, 1e5, 6e4, 7e4])
+    # The recording is predicted from its own initial state: its first speed, its yaw rate over
+    # the first 0.25 s and the steady-state side speed for it.
+    v0 = float(src.channels["vx"][0])
+    r0 = float(np.mean(src.channels["yaw_rate"][: int(0.25 * src.rate)]))
+    lateral0 = np.array([float(x) for x in steady_lateral_state(theta, vehicle, v0, r0)])
     clean, ok = simulate(
         theta,
         src.inputs(),
         vehicle,
-        v0=float(src.channels["vx"][0]),
+        v0=v0,
         effects=["aero_drag"],
         effect_params={"aero_drag": {"CdA": 0.6}},
+        lateral0=lateral0,
     )
     resid = rec.measured(CHANNELS) - clean
     for i, c in enumerate(CHANNELS):

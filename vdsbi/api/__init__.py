@@ -35,6 +35,5 @@ from ._outputs import (
     write_outputs as write_outputs,
 )
 from ._plots import drive_plot as drive_plot, pairplot as pairplot, ppc_plot as ppc_plot
-from ._prepare import Problem as Problem, choose_segment as choose_segment, prepare as prepare
 from ._simulate import SimulateResult as SimulateResult, simulate as simulate
 from ._validate import PROFILE_V0 as PROFILE_V0

@@ -19,6 +19,7 @@ from ..problem import (
     Problem,
     ProblemSettings,
     grip_used,
+    longitudinal_mode,
     make_problem,
     parameter_names,
     parameter_units,
@@ -57,11 +58,17 @@ class IdentifyResult:
     out_dir: Path | None = None
 
     def table(self) -> str:
-        """Per-parameter mean, std and 5/50/95 % quantiles as aligned text."""
-        rows = [f"{'param':<10} {'mean':>11} {'std':>10} {'q05':>11} {'q50':>11} {'q95':>11}"]
+        """Per-parameter mean, std and 5/50/95 % quantiles as aligned text; a parameter the drive
+        cannot inform is printed as "not identified" with its prior range, never as an estimate."""
+        width = max(10, *(len(n) for n in self.summary["parameters"]))
+        rows = [f"{'param':<{width}} {'mean':>11} {'std':>10} {'q05':>11} {'q50':>11} {'q95':>11}"]
         for name, p in self.summary["parameters"].items():
+            if p.get("identified") is False:
+                lo, hi = p["prior"]
+                rows.append(f"{name:<{width}} not identified by this drive (prior {lo:.4g} .. {hi:.4g})")
+                continue
             rows.append(
-                f"{name:<10} {p['mean']:>11.4g} {p['std']:>10.3g} "
+                f"{name:<{width}} {p['mean']:>11.4g} {p['std']:>10.3g} "
                 f"{p['q05']:>11.4g} {p['q50']:>11.4g} {p['q95']:>11.4g}"
             )
         return "\n".join(rows)
@@ -188,9 +195,7 @@ def _problem(rec, veh, longitudinal: str, segment, max_duration: float | None, b
     """The drive as a `Problem`: 20-s windows with torques, 10-s windows following the speed."""
     if max_duration is not None and max_duration <= 0:
         raise InputError("settings", "--max-duration", "must be > 0")
-    if longitudinal not in ("auto", "torque", "speed"):
-        raise InputError("settings", "--longitudinal", f"must be auto, torque or speed, got {longitudinal!r}")
-    speed = longitudinal == "speed" or (longitudinal == "auto" and not rec.has_torques)
+    speed = longitudinal_mode(rec, longitudinal) == "speed"
     window = max_duration if max_duration is not None else (10.0 if speed else 20.0)
     settings = ProblemSettings(
         longitudinal=longitudinal, max_window=window, segment=segment, bandwidth=bandwidth

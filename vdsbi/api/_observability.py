@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from ..io import InputError, Recording
+from ..problem import make_problem
 from ..simulator import CHANNELS, SEED_CHANNELS, Inputs, Vehicle
 from ._validate import PROFILE_V0, checked_theta, checked_v0, first_speed, load_vehicle, noise_channels
 
@@ -26,9 +27,18 @@ class ObservabilityResult:
         from ..diagnostics import report_markdown
 
         r = self.report
-        return report_markdown(
+        text = report_markdown(
             r, title=f"Observability: {r['maneuver']}, v0 = {r['v0']:.3g} m/s, {r['noise']} noise"
         )
+        if "identifiability" in r:
+            text += (
+                f"\n## What this drive can tell ({r['longitudinal']}-driven, all windows)\n\n"
+                "| param | identified | posterior std / prior std | why not |\n|---|---|---|---|\n"
+            )
+            for name, v in r["identifiability"].items():
+                why = v["reason"] or ""
+                text += f"| {name} | {'yes' if v['identified'] else 'no'} | {v['ratio']:.3g} | {why} |\n"
+        return text
 
     def save(self, out: str | os.PathLike) -> None:
         """fisher.json and fisher.md into the directory `out`."""
@@ -54,7 +64,9 @@ def observability(
 
     Args:
         vehicle: vehicle constants (file or object).
-        maneuver: a recording (its inputs; by default its channels and first speed) or an
+        maneuver: a recording (its inputs and mode as `identify` sees them, by default the
+            channels `identify` conditions on and its first speed; the report then also holds
+            `identifiability` over the whole drive's windows), or an
             `Inputs` profile (by default the seed's five channels and v0 = 10.5 m/s).
         theta: parameters (array or {name: value} over the seed's Table II truth).
         v0: initial speed, m/s.
@@ -72,8 +84,10 @@ def observability(
 
     veh, source = load_vehicle(vehicle)
     rec = maneuver if isinstance(maneuver, Recording) else None
-    inputs = rec.inputs() if rec is not None else maneuver
-    channels = list(channels or (rec.channel_names if rec is not None else SEED_CHANNELS))
+    problem = None if rec is None else make_problem(rec, veh)
+    mode = "torque" if problem is None else problem.longitudinal
+    inputs = rec.inputs(longitudinal=mode, wheel_radius=veh.wheel_radius) if rec is not None else maneuver
+    channels = list(channels or (problem.channels if problem is not None else SEED_CHANNELS))
     bad = [c for c in channels if c not in CHANNELS]
     if bad:
         raise InputError(
@@ -84,8 +98,8 @@ def observability(
     v0 = checked_v0(v0)
     channels, dropped = noise_channels(channels, noise, veh, source)
     th = checked_theta(theta, veh)
-    model, params = _model(veh, effects, effect_params)
-    from ..diagnostics import fisher_report, model_fisher
+    model, params = _model(veh, effects, effect_params, mode)
+    from ..diagnostics import fisher_report, identifiability, model_fisher
 
     with jax.enable_x64(True):
         import jax.numpy as jnp
@@ -101,6 +115,10 @@ def observability(
             noise_std=veh.noise_std,
         )
         rep = fisher_report(fisher)
+        if problem is not None:
+            # Over the whole drive as identify sees it (windows, shared filter, noise model).
+            rep["identifiability"] = identifiability(problem, th, veh.default_prior())
+            rep["longitudinal"] = mode
     rep["maneuver"] = label or (rec.source if rec is not None else "inputs")
     rep["v0"] = v0
     rep["noise"] = noise
@@ -109,12 +127,12 @@ def observability(
     return ObservabilityResult(rep)
 
 
-def _model(vehicle: Vehicle, effects: Sequence[str], effect_params):
+def _model(vehicle: Vehicle, effects: Sequence[str], effect_params, longitudinal: str = "torque"):
     """The model with `effects` enabled and the effects' parameter vectors."""
     from ..simulator import effect_params_from, make_model
 
     try:
-        model = make_model(vehicle, list(effects))
+        model = make_model(vehicle, list(effects), longitudinal=longitudinal)
         _, params = effect_params_from(list(effects), effect_params)
     except ValueError as err:
         raise InputError("arguments", "value", str(err)) from None

@@ -9,6 +9,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from ..io import InputError, Recording
+from ..problem import longitudinal_mode
 from ..simulator import CHANNELS, Inputs, Vehicle
 from ._validate import checked_theta, checked_v0, first_speed, load_vehicle
 
@@ -97,7 +98,7 @@ def simulate(
     veh, source = load_vehicle(vehicle)
     th = checked_theta(theta, veh)
     rec = inputs if isinstance(inputs, Recording) else None
-    mode = "torque" if rec is None else _mode(rec, longitudinal)
+    mode = "torque" if rec is None else longitudinal_mode(rec, longitudinal)
     inp = rec.inputs(longitudinal=mode, wheel_radius=veh.wheel_radius) if rec is not None else inputs
     if v0 is None and rec is None:
         raise InputError("--v0", "v0", "give an initial speed for bare inputs")
@@ -129,16 +130,6 @@ def simulate(
         torque_front=None if given.torque_front is None else np.asarray(given.torque_front, dtype=float),
         torque_rear=None if given.torque_rear is None else np.asarray(given.torque_rear, dtype=float),
     )
-
-
-def _mode(rec: Recording, longitudinal: str) -> str:
-    if longitudinal not in ("auto", "torque", "speed"):
-        raise InputError("settings", "--longitudinal", f"must be auto, torque or speed, got {longitudinal!r}")
-    if longitudinal == "auto":
-        return "torque" if rec.has_torques else "speed"
-    if longitudinal == "torque" and not rec.has_torques:
-        raise InputError(rec.source, "torque_front", "no torque columns; use --longitudinal speed")
-    return longitudinal
 
 
 def _lateral0(rec: Recording, theta: np.ndarray, vehicle: Vehicle, v0: float):

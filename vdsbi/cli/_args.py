@@ -101,3 +101,14 @@ def segment(text: str) -> tuple[float, float]:
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected T0:T1 in seconds, got {text!r}") from None
     return a, b
+
+
+def add_longitudinal(parser: argparse.ArgumentParser) -> None:
+    """The `--longitudinal` option of the commands that read a recording."""
+    parser.add_argument(
+        "--longitudinal",
+        choices=("auto", "torque", "speed"),
+        default="auto",
+        help="torque: wheels driven by the recorded torques; speed: follow the measured speed (no "
+        "or commanded torques); auto (default): torque if the recording has torque columns",
+    )

@@ -36,13 +36,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         default=None,
         help="longest window, s (default 20 with torques, 10 following the speed)",
     )
-    p.add_argument(
-        "--longitudinal",
-        choices=("auto", "torque", "speed"),
-        default="auto",
-        help="torque: wheels driven by the recorded torques; speed: follow the measured speed (no "
-        "or commanded torques); auto (default): torque if the recording has torque columns",
-    )
+    _args.add_longitudinal(p)
     p.add_argument(
         "--final-dt",
         type=float,

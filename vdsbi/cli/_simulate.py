@@ -44,13 +44,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="random seed of the noise (default 0)")
     p.add_argument("--out", required=True, metavar="OUT.csv", help="recording to write")
     p.add_argument("--plot", metavar="PNG", help="also write a figure of the inputs and channels")
-    p.add_argument(
-        "--longitudinal",
-        choices=("auto", "torque", "speed"),
-        default="auto",
-        help="with --inputs: torque (drive the wheels by its torques), speed (follow its measured "
-        "speed) or auto (torque if it has torque columns); it is predicted from its own initial state",
-    )
+    _args.add_longitudinal(p)
     return p
 
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..diagnostics import Localisation, MisspecificationTest, locate_mismatch, misspecification_test
 from ..io import Recording, read_recording, read_vehicle
-from ..problem import Problem, ProblemSettings, make_problem
+from ..problem import Problem, ProblemSettings, longitudinal_mode, make_problem
 from ..simulator import PARAM_NAMES, Vehicle
 from ._candidates import effect_names, effect_space, label, pair_candidates, single_candidates
 from ._data import compared_dt, compared_inputs, fit_data
@@ -191,7 +191,7 @@ class _Progress:
 
 
 def _cut_windows(recording: Recording, vehicle: Vehicle, s: DiagnoseSettings, say) -> Problem:
-    speed = s.longitudinal == "speed" or (s.longitudinal == "auto" and not recording.has_torques)
+    speed = longitudinal_mode(recording, s.longitudinal) == "speed"
     settings = ProblemSettings(
         longitudinal=s.longitudinal,
         max_window=s.max_window or (10.0 if speed else 20.0),

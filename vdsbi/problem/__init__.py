@@ -12,6 +12,7 @@ from ._problem import (
     Problem as Problem,
     ProblemSettings as ProblemSettings,
     grip_used as grip_used,
+    longitudinal_mode as longitudinal_mode,
     make_problem as make_problem,
 )
 from ._simulate import (

@@ -224,8 +224,15 @@ def _tail(decimator) -> int:
     return 0 if decimator is None else decimator.factor - 1
 
 
-def _mode(rec: Recording, settings: ProblemSettings) -> str:
-    mode = settings.longitudinal
+def longitudinal_mode(rec: Recording, longitudinal: str = "auto") -> str:
+    """ "torque" or "speed" for `rec`: "auto" is torque when it has torque columns.
+
+    Raises:
+        InputError: an unknown mode, or "torque" for a recording without torques.
+    """
+    if longitudinal not in (*LONGITUDINAL_MODES, "auto"):
+        raise InputError("settings", "--longitudinal", f"must be auto, torque or speed, got {longitudinal!r}")
+    mode = longitudinal
     if mode == "auto":
         mode = "torque" if rec.has_torques else "speed"
     if mode == "torque" and not rec.has_torques:
@@ -358,7 +365,7 @@ def make_problem(rec: Recording, vehicle: Vehicle, settings: ProblemSettings = P
         InputError: naming the recording and what is missing (torques, speed, channels, a
             segment outside the recording).
     """
-    mode = _mode(rec, settings)
+    mode = longitudinal_mode(rec, settings.longitudinal)
     channels = _channels(rec, mode, settings)
     if settings.segment is not None:
         rec = _restrict(rec, settings.segment)
