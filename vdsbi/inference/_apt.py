@@ -205,6 +205,20 @@ def _truncated_prior(key, flow, prior, x_o, n, config) -> tuple[Array, dict]:
     return jnp.asarray(acc), info
 
 
+@dataclasses.dataclass(frozen=True)
+class _Problem:
+    """What stays fixed across the rounds of one :func:`apt` call."""
+
+    simulate: Callable[[PRNGKeyArray, Array], tuple[Array, Array]]
+    prior: BoxPrior
+    x_o: Array
+    embedding: AbstractEmbedding
+    config: NPEConfig
+    truncate: bool
+    on_epoch_end: Callable[[int, int, float, float], None] | None
+    mesh: Any
+
+
 def apt(
     key: PRNGKeyArray,
     simulate: Callable[[PRNGKeyArray, Array], tuple[Array, Array]],
@@ -244,96 +258,153 @@ def apt(
         ``(posterior at x_o, final state)``.
     """
     x_o = jnp.asarray(x_o)
-    sims = (
-        [int(sims_per_round)] * rounds if np.ndim(sims_per_round) == 0 else [int(s) for s in sims_per_round]
-    )
-    if len(sims) != rounds:
-        raise ValueError(f"sims_per_round has {len(sims)} entries for {rounds} rounds")
+    sims = _sims_schedule(sims_per_round, rounds)
     mesh = data_mesh() if mesh is None else mesh
+    problem = _Problem(simulate, prior, x_o, embedding, config, truncate, on_epoch_end, mesh)
     if state is None:
-        state = APTState(
-            round=0,
-            key=key,
-            theta=np.zeros((0, prior.dim), np.float32),
-            x=np.zeros((0, *x_o.shape), np.float32),
-            round_ids=np.zeros((0,), np.int32),
-            is_val=np.zeros((0,), bool),
-            flow=None,
-        )
+        state = _initial_state(key, prior, x_o)
     for r in range(state.round, rounds):
-        t0 = time.perf_counter()
-        k_round, k_next = jax.random.split(state.key)
-        k_prop, k_sim, k_split, k_init, k_train = jax.random.split(k_round, 5)
-        n = sims[r]
-        info: dict[str, Any] = {"round": r, "num_simulations": n}
-        if r == 0 or state.flow is None:
-            theta = prior.sample(k_prop, n)
-            info["proposal"] = "prior"
-        elif truncate:
-            theta, tinfo = _truncated_prior(k_prop, state.flow, prior, x_o, n, config)
-            info.update(proposal="truncated_prior", **tinfo)
-        else:
-            theta = _sample(state.flow, k_prop, x_o, n)
-            info["proposal"] = "posterior"
-        x, valid = simulate(k_sim, theta)
-        theta, x = np.asarray(theta, np.float32), np.asarray(x, np.float32)
-        valid = np.asarray(valid, bool).reshape(n)
-        if x.shape[0] != n or x.shape[1:] != x_o.shape:
-            raise ValueError(f"simulate returned x of shape {x.shape}; expected ({n}, *{x_o.shape})")
-        finite = np.all(np.isfinite(x.reshape(n, -1)), axis=1)
-        keep = valid & finite
-        info.update(
-            num_invalid=int((~valid).sum()),
-            num_nonfinite=int((valid & ~finite).sum()),
-            num_used=int(keep.sum()),
-        )
-        m = int(keep.sum())
-        n_val = max(1, int(round(config.validation_fraction * m)))
-        is_val_new = np.zeros(m, bool)
-        is_val_new[np.asarray(jax.random.permutation(k_split, m))[:n_val]] = True
-        all_theta = np.concatenate([state.theta, theta[keep]])
-        all_x = np.concatenate([state.x, x[keep]])
-        round_ids = np.concatenate([state.round_ids, np.full(m, r, np.int32)])
-        is_val = np.concatenate([state.is_val, is_val_new])
-
-        flow = state.flow
-        if flow is None or config.retrain_from_scratch:
-            flow = build_flow(k_init, prior, embedding, all_theta[~is_val], all_x[~is_val], config)
-        if r == 0 or truncate:
-            loss = MaximumLikelihoodLoss()
-        else:
-            loss = AtomicLoss(num_atoms=config.num_atoms, combined=config.combined_loss)
-        flow, finfo = fit(
-            k_train,
-            flow,
-            all_theta,
-            all_x,
-            round_ids == 0,
-            is_val,
-            loss,
-            batch_size=config.batch_size,
-            learning_rate=config.learning_rate,
-            weight_decay=config.weight_decay,
-            clip_norm=config.clip_norm,
-            max_epochs=config.max_epochs,
-            patience=config.patience,
-            on_epoch_end=on_epoch_end,
-            round_index=r,
-            mesh=mesh,
-        )
-        info.update(finfo, loss=type(loss).__name__, train_s=time.perf_counter() - t0)
-        state = APTState(
-            round=r + 1,
-            key=k_next,
-            theta=all_theta,
-            x=all_x,
-            round_ids=round_ids,
-            is_val=is_val,
-            flow=flow,
-            history=(*state.history, info),
-        )
+        state = _run_round(problem, state, r, sims[r])
         if on_round_end is not None:
             on_round_end(state)
     if state.flow is None:
         raise ValueError("rounds must be >= 1")
     return Posterior(state.flow, x_o), state
+
+
+def _sims_schedule(sims_per_round: int | Sequence[int], rounds: int) -> list[int]:
+    """Simulations in each round: ``sims_per_round`` repeated, or checked to have one per round."""
+    sims = (
+        [int(sims_per_round)] * rounds if np.ndim(sims_per_round) == 0 else [int(s) for s in sims_per_round]
+    )
+    if len(sims) != rounds:
+        raise ValueError(f"sims_per_round has {len(sims)} entries for {rounds} rounds")
+    return sims
+
+
+def _initial_state(key: PRNGKeyArray, prior: BoxPrior, x_o: Array) -> APTState:
+    """The state before round 1: no simulations, no estimator; rounds start from ``key``."""
+    return APTState(
+        round=0,
+        key=key,
+        theta=np.zeros((0, prior.dim), np.float32),
+        x=np.zeros((0, *x_o.shape), np.float32),
+        round_ids=np.zeros((0,), np.int32),
+        is_val=np.zeros((0,), bool),
+        flow=None,
+    )
+
+
+def _run_round(problem: _Problem, state: APTState, r: int, n: int) -> APTState:
+    """Round ``r``: propose ``n`` parameters, simulate them, train on all kept data, record."""
+    t0 = time.perf_counter()
+    k_round, k_next = jax.random.split(state.key)
+    k_prop, k_sim, k_split, k_init, k_train = jax.random.split(k_round, 5)
+    info: dict[str, Any] = {"round": r, "num_simulations": n}
+    theta, proposal_info = _propose(problem, state.flow, r, k_prop, n)
+    info.update(proposal_info)
+    theta, x, sim_info = _simulate_kept(problem, k_sim, theta, n)
+    info.update(sim_info)
+    all_theta, all_x, round_ids, is_val = _append_round(state, theta, x, r, k_split, problem.config)
+    flow, fit_info = _train_round(
+        problem, state.flow, r, k_init, k_train, all_theta, all_x, round_ids, is_val
+    )
+    info.update(fit_info, train_s=time.perf_counter() - t0)
+    return APTState(
+        round=r + 1,
+        key=k_next,
+        theta=all_theta,
+        x=all_x,
+        round_ids=round_ids,
+        is_val=is_val,
+        flow=flow,
+        history=(*state.history, info),
+    )
+
+
+def _propose(
+    problem: _Problem, flow: ConditionalFlow | None, r: int, key: PRNGKeyArray, n: int
+) -> tuple[Array, dict[str, Any]]:
+    """``n`` parameters for round ``r``: from the prior, the truncated prior or the posterior."""
+    if r == 0 or flow is None:
+        return problem.prior.sample(key, n), {"proposal": "prior"}
+    if problem.truncate:
+        theta, tinfo = _truncated_prior(key, flow, problem.prior, problem.x_o, n, problem.config)
+        return theta, {"proposal": "truncated_prior", **tinfo}
+    return _sample(flow, key, problem.x_o, n), {"proposal": "posterior"}
+
+
+def _simulate_kept(
+    problem: _Problem, key: PRNGKeyArray, theta: Array, n: int
+) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
+    """Simulate ``theta``; keep the valid, finite draws and count the discarded ones."""
+    x, valid = problem.simulate(key, theta)
+    theta, x = np.asarray(theta, np.float32), np.asarray(x, np.float32)
+    valid = np.asarray(valid, bool).reshape(n)
+    x_shape = problem.x_o.shape
+    if x.shape[0] != n or x.shape[1:] != x_shape:
+        raise ValueError(f"simulate returned x of shape {x.shape}; expected ({n}, *{x_shape})")
+    finite = np.all(np.isfinite(x.reshape(n, -1)), axis=1)
+    keep = valid & finite
+    counts = {
+        "num_invalid": int((~valid).sum()),
+        "num_nonfinite": int((valid & ~finite).sum()),
+        "num_used": int(keep.sum()),
+    }
+    return theta[keep], x[keep], counts
+
+
+def _append_round(
+    state: APTState, theta: np.ndarray, x: np.ndarray, r: int, key: PRNGKeyArray, config: NPEConfig
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``state``'s data plus round ``r``'s kept draws, a random share of them held out for validation."""
+    m = theta.shape[0]
+    n_val = max(1, int(round(config.validation_fraction * m)))
+    is_val_new = np.zeros(m, bool)
+    is_val_new[np.asarray(jax.random.permutation(key, m))[:n_val]] = True
+    return (
+        np.concatenate([state.theta, theta]),
+        np.concatenate([state.x, x]),
+        np.concatenate([state.round_ids, np.full(m, r, np.int32)]),
+        np.concatenate([state.is_val, is_val_new]),
+    )
+
+
+def _train_round(
+    problem: _Problem,
+    flow: ConditionalFlow | None,
+    r: int,
+    k_init: PRNGKeyArray,
+    k_train: PRNGKeyArray,
+    theta: np.ndarray,
+    x: np.ndarray,
+    round_ids: np.ndarray,
+    is_val: np.ndarray,
+) -> tuple[ConditionalFlow, dict[str, Any]]:
+    """Train the flow on all kept data (a new one from ``k_init`` if none or retraining from scratch)."""
+    config = problem.config
+    if flow is None or config.retrain_from_scratch:
+        flow = build_flow(k_init, problem.prior, problem.embedding, theta[~is_val], x[~is_val], config)
+    if r == 0 or problem.truncate:
+        loss = MaximumLikelihoodLoss()
+    else:
+        loss = AtomicLoss(num_atoms=config.num_atoms, combined=config.combined_loss)
+    flow, finfo = fit(
+        k_train,
+        flow,
+        theta,
+        x,
+        round_ids == 0,
+        is_val,
+        loss,
+        batch_size=config.batch_size,
+        learning_rate=config.learning_rate,
+        weight_decay=config.weight_decay,
+        clip_norm=config.clip_norm,
+        max_epochs=config.max_epochs,
+        patience=config.patience,
+        on_epoch_end=problem.on_epoch_end,
+        round_index=r,
+        mesh=problem.mesh,
+    )
+    return flow, {**finfo, "loss": type(loss).__name__}

@@ -314,6 +314,23 @@ def build_recording(
     """
     source = str(source)
     found = [str(c) for c in columns]
+    torques = _check_header(columns, found, source)
+    warnings = _torque_warnings(torques, found, source)
+    present = _check_measured(columns, found, torques, source)
+    names = [*REQUIRED, *torques, *present]
+    data = _to_numeric(columns, names, source)
+    t = data["t"]
+    dt = _check_time(t, source)
+    signals = {k: data[k] for k in names[1:]}
+    _check_finite(signals, t, source)
+    n_sustain = max(1, int(round(SUSTAIN_WINDOW / dt)))
+    _check_limits(signals, t, n_sustain, source)
+    _check_wheel_sign(signals, t, n_sustain, source)
+    return _assemble(t, signals, present, source, rate, 1.0 / dt, warnings)
+
+
+def _check_header(columns: Mapping[str, np.ndarray], found: list[str], source: str) -> list[str]:
+    """Check the header row, duplicates, the required columns and the torque pair; the torques given."""
     if found and all(_is_number(c) for c in found):
         raise InputError(source, "header", "the first row holds numbers; expected a header row t,steer,...")
     dup = sorted({c for c in found if found.count(c) > 1})
@@ -332,6 +349,11 @@ def build_recording(
             f"missing column: {torques[0]} is given without it, but the axle torques come as a pair "
             "(both or neither)",
         )
+    return torques
+
+
+def _torque_warnings(torques: list[str], found: list[str], source: str) -> list[str]:
+    """A warning when there are no torque columns but columns that look like misspelled ones."""
     warnings = []
     if not torques:
         near = _near(TORQUES, found, cutoff=0.8)
@@ -340,6 +362,13 @@ def build_recording(
                 f"{source}: {', '.join(TORQUES)}: no torque columns, read without torques "
                 f"(found {near}: misspelled?)"
             )
+    return warnings
+
+
+def _check_measured(
+    columns: Mapping[str, np.ndarray], found: list[str], torques: list[str], source: str
+) -> list[str]:
+    """Check for enough measured channels, and a speed when there are no torques; the channels present."""
     present = [c for c in CHANNELS if c in columns]
     if len(present) < MIN_MEASURED:
         missing = [c for c in CHANNELS if c not in columns]
@@ -362,7 +391,11 @@ def build_recording(
             + f"; found columns: {', '.join(found[:12])}"
             + (", ..." if len(found) > 12 else ""),
         )
-    names = [*REQUIRED, *torques, *present]
+    return present
+
+
+def _to_numeric(columns: Mapping[str, np.ndarray], names: list[str], source: str) -> dict[str, np.ndarray]:
+    """The columns `names` as 1-D float arrays; non-numeric cells (not empty ones) are an error."""
     data: dict[str, np.ndarray] = {}
     for name in names:
         x = np.asarray(columns[name])
@@ -379,7 +412,11 @@ def build_recording(
                 )
             x = num
         data[name] = x.astype(float)
-    t = data["t"]
+    return data
+
+
+def _check_time(t: np.ndarray, source: str) -> float:
+    """Check the time stamps: finite, strictly increasing, long enough and uniform; the step, s."""
     n = t.shape[0]
     if n == 0:
         raise InputError(source, "t", "no data rows; expected a header row followed by samples")
@@ -404,19 +441,25 @@ def build_recording(
             "t",
             f"recording spans {t[-1] - t[0]:.3g} s ({n} rows); expected at least {MIN_DURATION:g} s",
         )
-    dt = check_uniform(t, source)
-    for name in names[1:]:
-        x = data[name]
+    return check_uniform(t, source)
+
+
+def _check_finite(signals: dict[str, np.ndarray], t: np.ndarray, source: str) -> None:
+    """Every value of every signal is finite (the first NaN, empty cell or inf is reported)."""
+    for name, x in signals.items():
         bad = np.flatnonzero(~np.isfinite(x))
         if bad.size:
             kind = "NaN (or empty cell)" if np.isnan(x[bad[0]]) else f"{x[bad[0]]}"
             raise InputError(source, name, f"{kind} at {_where(t, int(bad[0]))}; expected finite numbers")
-    n_sustain = max(1, int(round(SUSTAIN_WINDOW / dt)))
-    for name in names[1:]:
+
+
+def _check_limits(signals: dict[str, np.ndarray], t: np.ndarray, n_sustain: int, source: str) -> None:
+    """No signal exceeds its plausibility limit in `LIMITS` over `n_sustain` samples (unit mistakes)."""
+    for name, x in signals.items():
         limit, hint = LIMITS.get(name, (None, ""))
         if limit is None:
             continue
-        smooth = np.abs(_running_median(data[name], n_sustain))
+        smooth = np.abs(_running_median(x, n_sustain))
         if smooth.max() > limit:
             i = int(np.argmax(smooth))
             raise InputError(
@@ -425,9 +468,13 @@ def build_recording(
                 f"|{name}| = {smooth[i]:.4g} sustained over {SUSTAIN_WINDOW:g} s at {_where(t, i)} "
                 f"exceeds {limit:g}: {hint}",
             )
+
+
+def _check_wheel_sign(signals: dict[str, np.ndarray], t: np.ndarray, n_sustain: int, source: str) -> None:
+    """No wheel speed stays below `MIN_OMEGA` over `n_sustain` samples (a flipped sign, or reverse)."""
     for name in ("omega_front", "omega_rear"):
-        if name in data:
-            smooth = _running_median(data[name], n_sustain)
+        if name in signals:
+            smooth = _running_median(signals[name], n_sustain)
             if smooth.min() < MIN_OMEGA:
                 i = int(np.argmin(smooth))
                 raise InputError(
@@ -436,8 +483,19 @@ def build_recording(
                     f"wheel speed {smooth[i]:.4g} rad/s at {_where(t, i)} is below {MIN_OMEGA:g}: "
                     "expected forward driving with omega >= 0 (is the sign flipped?)",
                 )
-    original_rate = 1.0 / dt
-    t_new, out = resample(t, {k: data[k] for k in names[1:]}, rate)
+
+
+def _assemble(
+    t: np.ndarray,
+    signals: dict[str, np.ndarray],
+    present: list[str],
+    source: str,
+    rate: float,
+    original_rate: float,
+    warnings: list[str],
+) -> Recording:
+    """Resample the validated signals to `rate`, then add the kinematic consistency checks' warnings."""
+    t_new, out = resample(t, signals, rate)
     rec = Recording(
         t=t_new,
         steer=out["steer"],
