@@ -49,14 +49,17 @@ def drop_torques(rec):
     return build_recording(cols, rec.source + " (torque columns dropped)")
 
 
-def nrmse(problem, pred) -> dict[str, float]:
+def by_channel(problem, pred) -> dict[str, np.ndarray]:
+    """(W, K) arrays of the compared channels of interest, keyed by name."""
+    return {c: pred[..., problem.channels.index(c)] for c in CHANNELS if c in problem.channels}
+
+
+def nrmse(problem, pred: dict) -> dict[str, float]:
     mask = problem.held
     out = {}
-    for c in CHANNELS:
-        if c in problem.channels:
-            i = problem.channels.index(c)
-            y, p = problem.y[..., i][mask], pred[..., i][mask]
-            out[c] = float(np.sqrt(np.mean((p - y) ** 2)) / np.std(y))
+    for c, p in pred.items():
+        y = problem.y[..., problem.channels.index(c)][mask]
+        out[c] = float(np.sqrt(np.mean((p[mask] - y) ** 2)) / np.std(y))
     return out
 
 
@@ -141,7 +144,7 @@ def overlay(path, problem, preds: dict[str, np.ndarray]) -> None:
                 label="recording (5 Hz low-pass)" if j == 0 else None,
             )
             for name, p in preds.items():
-                ax.plot(t, p[w, v, i], color=colours[name], lw=1.0, label=name if j == 0 else None)
+                ax.plot(t, p[c][w, v], color=colours[name], lw=1.0, label=name if j == 0 else None)
         ax.set_ylabel({"yaw_rate": "yaw rate [rad/s]", "ay": "a_y [m/s²]"}[c])
         ax.grid(alpha=0.3)
     axes[0, 0].legend(loc="upper right", fontsize=7, ncol=4)
@@ -184,13 +187,15 @@ def run_one(name: str, mode: str, args, out: Path) -> dict:
     lab, _ = predict(problem, ref, effects, eff_values)
     speed_problem = problem
     if mode == "torque":
-        speed_problem = make_problem(
-            drop_torques(rec), veh, ProblemSettings(longitudinal="speed", max_window=window, bandwidth=5.0)
-        )
+        # The same windows (same recording, same segments), followed by the measured speed.
+        settings = ProblemSettings(longitudinal="speed", max_window=window, bandwidth=5.0)
+        speed_problem = make_problem(rec, veh, settings)
     base_fit, base_pred = baseline(speed_problem, rec, veh)
-    preds = {"ours": ours, "lab values": lab}
-    if mode == "speed":
-        preds["linear LS baseline"] = base_pred
+    preds = {
+        "ours": by_channel(problem, ours),
+        "lab values": by_channel(problem, lab),
+        "linear LS baseline": by_channel(speed_problem, base_pred),
+    }
     overlay(out / "overlay.png", problem, preds)
     return {
         "drive": name,
@@ -200,11 +205,7 @@ def run_one(name: str, mode: str, args, out: Path) -> dict:
         "not_identified": s["not_identified"],
         "effects": effects,
         "windows": s["problem"]["windows"],
-        "held_out_nrmse": {
-            "ours": nrmse(problem, ours),
-            "lab values": nrmse(problem, lab),
-            "linear LS baseline": nrmse(speed_problem, base_pred),
-        },
+        "held_out_nrmse": {k: nrmse(problem, v) for k, v in preds.items()},
         "baseline_fit": base_fit,
         "validation": s["validation"],
         "ppc": s["ppc"],
