@@ -41,8 +41,11 @@ def _pieces(stretches: list[tuple[float, float]], max_window: float) -> list[tup
     return out
 
 
-#: Window edges move by at most this fraction of the window length to a quieter moment.
+#: Window edges move by at most this fraction of the window length to a quieter moment ...
 EDGE_SEARCH = 0.3
+#: ... and only when the car is cornering there: below this lateral acceleration, m/s², the
+#: steady-state start is already accurate and the edge stays.
+QUIET = 1.0
 
 
 def lateral_activity(rec: Recording, wheel_radius: float) -> np.ndarray | None:
@@ -67,6 +70,8 @@ def _quiet_edges(rec: Recording, pieces, activity: np.ndarray, max_window: float
     reach = EDGE_SEARCH * max_window
     for k in range(len(out)):
         a, b = out[k]
+        if activity[min(int(np.searchsorted(rec.t, a)), len(activity) - 1)] < QUIET:
+            continue
         joined = k > 0 and abs(out[k - 1][1] - a) < 1e-9
         lo = max(a - reach, out[k - 1][0] + 0.5 * max_window) if joined else a
         hi = min(a + reach, b - 0.5 * max_window)
