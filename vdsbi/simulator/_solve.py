@@ -10,12 +10,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from jaxtyping import Array, Bool, Float
 
 from ._dynamics import LONGITUDINAL_MODES, Args, VehicleModel
 from ._effects import EFFECTS, get_effect
 from ._inputs import Inputs
+from ._sharding import shard_draws
 from ._vehicle import PARAM_NAMES, Vehicle
 
 
@@ -225,13 +225,6 @@ def _solve_batch(model, theta, inputs, v0, effect_params, solver, lateral0=None)
     return jax.vmap(fn)(theta, v0, effect_params, lateral0)
 
 
-def _shard(x, n_dev):
-    if n_dev == 1:
-        return x
-    mesh = Mesh(np.array(jax.devices()), ("batch",))
-    return jax.device_put(x, NamedSharding(mesh, PartitionSpec("batch")))
-
-
 def solve_batch(
     model: VehicleModel,
     theta: Float[Array, "N 6"],
@@ -257,17 +250,7 @@ def solve_batch(
     )
     if lateral0 is not None:
         lateral0 = jnp.broadcast_to(jnp.asarray(lateral0, dtype=theta.dtype), (n, 2))
-    n_dev = jax.device_count()
-    pad = (-n) % n_dev
-    if pad:
-        # Pad with copies of the first draw so each device gets an equal share.
-        take = lambda a: jnp.concatenate([a, jnp.repeat(a[:1], pad, axis=0)])
-        theta, v0 = take(theta), take(v0)
-        effect_params = tuple(take(p) for p in effect_params)
-        lateral0 = None if lateral0 is None else take(lateral0)
-    theta, v0, effect_params, lateral0 = jax.tree.map(
-        lambda a: _shard(a, n_dev), (theta, v0, effect_params, lateral0)
-    )
+    theta, v0, effect_params, lateral0 = shard_draws((theta, v0, effect_params, lateral0), n)
     ys, ok = _solve_batch(model, theta, inputs, v0, effect_params, solver, lateral0)
     return ys[:n], ok[:n]
 
