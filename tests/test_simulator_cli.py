@@ -9,6 +9,7 @@ import pytest
 
 from vdsbi.cli import main
 from vdsbi.io import read_recording, read_vehicle
+from vdsbi.problem import smoothed_yaw_rate
 from vdsbi.simulator import (
     CHANNELS,
     PARAM_NAMES,
@@ -57,10 +58,10 @@ def test_recording_inputs_theta_file_effects_and_noise(tmp_path):
     # v0 from the recording's vx; the noise is the vehicle's additive noise on ax, ay, yaw_rate
     vehicle = read_vehicle(VEHICLE)
     theta = np.array([1.2, 0.5, 1e5, 1e5, 6e4, 7e4])
-    # The recording is predicted from its own initial state: its first speed, its yaw rate over
-    # the first 0.25 s and the steady-state side speed for it.
+    # The recording is predicted from its own initial state: its first speed, its smoothed yaw
+    # rate and the steady-state side speed for it (as a problem's windows start).
     v0 = float(src.channels["vx"][0])
-    r0 = float(np.mean(src.channels["yaw_rate"][: int(0.25 * src.rate)]))
+    r0 = float(smoothed_yaw_rate(src)[0])
     lateral0 = np.array([float(x) for x in steady_lateral_state(theta, vehicle, v0, r0)])
     clean, ok = simulate(
         theta,

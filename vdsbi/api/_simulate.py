@@ -9,7 +9,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from ..io import InputError, Recording
-from ..problem import longitudinal_mode
+from ..problem import longitudinal_mode, measured_longitudinal, smoothed_yaw_rate
 from ..simulator import CHANNELS, Inputs, Vehicle
 from ._validate import checked_theta, checked_v0, first_speed, load_vehicle
 
@@ -99,7 +99,7 @@ def simulate(
     th = checked_theta(theta, veh)
     rec = inputs if isinstance(inputs, Recording) else None
     mode = "torque" if rec is None else longitudinal_mode(rec, longitudinal)
-    inp = rec.inputs(longitudinal=mode, wheel_radius=veh.wheel_radius) if rec is not None else inputs
+    inp = inputs if rec is None else _recording_inputs(rec, veh, mode)
     if v0 is None and rec is None:
         raise InputError("--v0", "v0", "give an initial speed for bare inputs")
     v0 = first_speed(rec, veh) if v0 is None else checked_v0(v0)
@@ -132,13 +132,22 @@ def simulate(
     )
 
 
+def _recording_inputs(rec: Recording, vehicle: Vehicle, mode: str) -> Inputs:
+    """A recording's inputs in `mode`, the measured longitudinal motion as identify uses it."""
+    inp = rec.inputs(longitudinal=mode, wheel_radius=vehicle.wheel_radius)
+    if mode != "speed":
+        return inp
+    speed, accel = measured_longitudinal(rec, vehicle.wheel_radius)
+    return Inputs(inp.t0, inp.dt, inp.steer, inp.torque_front, inp.torque_rear, speed=speed, accel=accel)
+
+
 def _lateral0(rec: Recording, theta: np.ndarray, vehicle: Vehicle, v0: float):
-    """The recording's own initial lateral state: its yaw rate over the first 0.25 s and the
-    steady-state side speed for it under θ (zero without a yaw-rate channel)."""
+    """The recording's own initial lateral state, as a problem's window starts: its smoothed
+    yaw rate and the steady-state side speed for it under θ (none without a yaw-rate channel)."""
     from ..simulator import steady_lateral_state
 
-    if "yaw_rate" not in rec.channels:
+    yaw = smoothed_yaw_rate(rec)
+    if yaw is None:
         return None
-    r0 = float(np.mean(rec.channels["yaw_rate"][: max(1, int(round(0.25 * rec.rate)))]))
-    vy0, r0 = steady_lateral_state(np.asarray(theta), vehicle, v0, r0)
+    vy0, r0 = steady_lateral_state(np.asarray(theta), vehicle, v0, float(yaw[0]))
     return np.array([float(vy0), float(r0)])

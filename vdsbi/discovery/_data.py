@@ -19,9 +19,7 @@ def fit_data(problem: Problem, part: str = "train", *, truncate: bool = True) ->
     """
     mask = problem.part(part)
     k_end = int(np.max(np.nonzero(mask.any(0))[0])) + 1 if truncate else mask.shape[1]
-    factor = compared_factor(problem)
-    tail = 0 if problem.decimator is None else factor - 1
-    n_end = min(problem.t.shape[1], (k_end - 1) * factor + 1 + tail) if truncate else problem.t.shape[1]
+    n_end = problem.model_samples(k_end) if truncate else problem.t.shape[1]
     inputs = jax.tree.map(lambda a: a[:, :n_end] if a.ndim == 2 else a, problem.inputs())
     return FitData(
         inputs=inputs,
@@ -37,19 +35,9 @@ def fit_data(problem: Problem, part: str = "train", *, truncate: bool = True) ->
     )
 
 
-def compared_factor(problem: Problem) -> int:
-    """Model samples per compared sample."""
-    return 1 if problem.decimator is None else problem.decimator.factor
-
-
-def compared_dt(problem: Problem) -> float:
-    """Interval of the compared samples, s."""
-    return problem.dt * compared_factor(problem)
-
-
 def compared_inputs(problem: Problem) -> np.ndarray:
     """(W, K, 3) steer and axle torques at the compared samples (for locating a mismatch)."""
-    return problem.u[:, :: compared_factor(problem)][:, : problem.y.shape[1]]
+    return problem.u[:, :: problem.factor][:, : problem.y.shape[1]]
 
 
 def held_out_from(problem: Problem) -> list[float]:

@@ -24,7 +24,7 @@ from ..io import Recording, read_recording, read_vehicle
 from ..problem import Problem, ProblemSettings, longitudinal_mode, make_problem
 from ..simulator import PARAM_NAMES, Vehicle
 from ._candidates import effect_names, effect_space, label, pair_candidates, single_candidates
-from ._data import compared_dt, compared_inputs, fit_data
+from ._data import compared_inputs, fit_data
 from ._fit import FitResult, Fitter
 from ._rank import STRONG, Ranked, choose, merge, rank, separability
 from ._report import build_report, write_report
@@ -228,14 +228,14 @@ def _fit_base(coarse: Fitter, fitter: Fitter, vehicle: Vehicle, s: DiagnoseSetti
 def _check(fit: FitResult, windows: Problem, seed: int, s: DiagnoseSettings) -> _Check:
     res, jac, ts, us = _stretches(fit, windows)
     test = misspecification_test(
-        seed, res, jac, rate=1.0 / compared_dt(windows), channels=windows.channels, num_draws=s.num_draws
+        seed, res, jac, rate=1.0 / windows.compared_dt, channels=windows.channels, num_draws=s.num_draws
     )
     return _Check(test, res, ts, us)
 
 
 def _locate(before: _Check, windows: Problem, s: DiagnoseSettings, say) -> tuple[Localisation, bool]:
     """Where the base fit's residual departs from noise, and whether the test rejects it."""
-    loc = locate_mismatch(before.test, before.residual, before.t, before.u, rate=1.0 / compared_dt(windows))
+    loc = locate_mismatch(before.test, before.residual, before.t, before.u, rate=1.0 / windows.compared_dt)
     detected = bool(before.test.p_value < s.alpha)
     say(f"misspecification p = {before.test.p_value:.4f} -> {'detected' if detected else 'not detected'}")
     return loc, detected

@@ -13,7 +13,7 @@ from ..diagnostics import Localisation, MisspecificationTest
 from ..problem import Problem
 from ..simulator import CHANNELS, EFFECTS, PARAM_NAMES
 from ._candidates import all_pairs, label
-from ._data import compared_dt, held_out_from
+from ._data import held_out_from
 from ._fit import FitResult, Fitter
 from ._rank import PAIR_LOG_PRIOR, STRONG, Ranked, verdict
 
@@ -303,7 +303,7 @@ def write_plots(result, out: Path) -> None:
     # Residual heat map: channel × time, low-passed whitened residual of the base fit.
     res = result.residual_stretches["before"]
     ts = result.residual_stretches["t"]
-    dt = compared_dt(win)
+    dt = win.compared_dt
     m = max(1, int(round(0.25 / dt)))
     kern = np.ones(m) / m
     sm = np.stack(

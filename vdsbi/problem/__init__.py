@@ -1,5 +1,9 @@
 """A recording plus a vehicle as one problem: windows, channels, noise, inputs, initial states, held-out."""
 
+from ._measured import (
+    measured_longitudinal as measured_longitudinal,
+    smoothed_yaw_rate as smoothed_yaw_rate,
+)
 from ._noise import dof_factor as dof_factor, lag1_autocorrelation as lag1_autocorrelation
 from ._parameters import (
     parameter_names as parameter_names,

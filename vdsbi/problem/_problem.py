@@ -16,6 +16,7 @@ import numpy as np
 
 from ..io import InputError, Recording
 from ..simulator import CHANNELS, GRAVITY, Decimator, Inputs, Vehicle
+from ._measured import measured_longitudinal, smoothed_yaw_rate
 from ._noise import raw_noise_std
 from ._windows import Window, choose_windows
 
@@ -151,8 +152,7 @@ class Problem:
         mask = self.part(name)
         keep = np.flatnonzero(mask.any(1))
         k_end = int(np.max(np.nonzero(mask[keep].any(0))[0])) + 1
-        factor = 1 if self.decimator is None else self.decimator.factor
-        n_end = min(self.t.shape[1], (k_end - 1) * factor + 1 + _tail(self.decimator))
+        n_end = self.model_samples(k_end)
         cut = lambda a, n: None if a is None else a[keep, :n]
         return dataclasses.replace(
             self,
@@ -205,23 +205,30 @@ class Problem:
                 | ({"held_from": round(w.split, 3)} if w.split is not None else {})
                 for w in self.windows
             ],
-            "train_seconds": round(float(self.train.sum()) * self._out_dt, 2),
-            "held_out_seconds": round(float(self.held.sum()) * self._out_dt, 2),
+            "train_seconds": round(float(self.train.sum()) * self.compared_dt, 2),
+            "held_out_seconds": round(float(self.held.sum()) * self.compared_dt, 2),
             "filter": None
             if self.decimator is None
-            else {"cutoff_hz": self.decimator.cutoff, "output_rate_hz": 1.0 / self._out_dt},
+            else {"cutoff_hz": self.decimator.cutoff, "output_rate_hz": 1.0 / self.compared_dt},
             "noise_std": {c: float(s) for c, s in zip(self.channels, self.sigma)},
             "noise_source": dict(self.noise_source),
             **self.description,
         }
 
     @property
-    def _out_dt(self) -> float:
-        return self.dt * (1 if self.decimator is None else self.decimator.factor)
+    def factor(self) -> int:
+        """Model samples per compared sample."""
+        return 1 if self.decimator is None else self.decimator.factor
 
+    @property
+    def compared_dt(self) -> float:
+        """Interval of the compared samples, s."""
+        return self.dt * self.factor
 
-def _tail(decimator) -> int:
-    return 0 if decimator is None else decimator.factor - 1
+    def model_samples(self, k_end: int) -> int:
+        """Model-rate samples needed to produce the first `k_end` compared ones (a filtered
+        sample reaches `factor − 1` samples past its own time)."""
+        return min(self.t.shape[1], (k_end - 1) * self.factor + self.factor)
 
 
 def longitudinal_mode(rec: Recording, longitudinal: str = "auto") -> str:
@@ -279,13 +286,6 @@ def _decimator(rec: Recording, mode: str, settings: ProblemSettings) -> Decimato
     return Decimator(rate=rec.rate, cutoff=float(cutoff), factor=factor)
 
 
-def _running_mean(x: np.ndarray, n: int) -> np.ndarray:
-    if n <= 1:
-        return x
-    pad = np.pad(x, (n // 2, n - 1 - n // 2), mode="edge")
-    return np.convolve(pad, np.ones(n) / n, mode="valid")
-
-
 def _window_arrays(rec: Recording, windows: Sequence[Window], mode: str, vehicle: Vehicle):
     """Model-rate arrays (W, T, …) of the windows, padded to a common length by holding the end."""
     idx = [
@@ -294,15 +294,8 @@ def _window_arrays(rec: Recording, windows: Sequence[Window], mode: str, vehicle
     n_max = max(i1 - i0 for i0, i1 in idx)
     torques = (rec.torque_front, rec.torque_rear) if rec.has_torques else (np.zeros_like(rec.t),) * 2
     u_all = np.stack([rec.steer, *torques], -1)
-    speed_all = rec.speed(vehicle.wheel_radius)
-    if speed_all is None:
-        raise InputError(rec.source, "vx", "no speed: neither vx nor wheel speeds, so no initial speed")
-    n_avg = max(1, int(round(0.25 * rec.rate)))
-    if "ax" in rec.channels:
-        accel_all = _running_mean(rec.channels["ax"], n_avg)
-    else:
-        accel_all = np.gradient(_running_mean(speed_all, n_avg), rec.dt)
-    yaw_all = _running_mean(rec.channels["yaw_rate"], n_avg) if "yaw_rate" in rec.channels else None
+    speed_all, accel_all = measured_longitudinal(rec, vehicle.wheel_radius)
+    yaw_all = smoothed_yaw_rate(rec)
 
     def padded(a, i0, i1):
         seg = a[i0:i1]
@@ -434,8 +427,7 @@ def grip_used(problem: Problem) -> float | None:
     if "ay" in problem.channels:
         lateral = problem.y[..., problem.channels.index("ay")][mask]
     elif "yaw_rate" in problem.channels and problem.speed is not None:
-        factor = 1 if problem.decimator is None else problem.decimator.factor
-        speed = problem.speed[:, ::factor]
+        speed = problem.speed[:, :: problem.factor]
         lateral = (problem.y[..., problem.channels.index("yaw_rate")] * speed)[mask]
     else:
         return None

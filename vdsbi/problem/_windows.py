@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 
 from ..io import Recording, find_segments
+from ._measured import running_mean
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,7 +53,7 @@ def lateral_activity(rec: Recording, wheel_radius: float) -> np.ndarray | None:
     """(T,) how far from straight running the car is, in m/s²: |a_y| and |v_x·r| smoothed over
     0.5 s, whichever is larger; None without ay and yaw rate."""
     n = max(1, int(round(0.5 * rec.rate)))
-    smooth = lambda x: np.convolve(np.pad(x, (n // 2, n - 1 - n // 2), mode="edge"), np.ones(n) / n, "valid")
+    smooth = lambda x: running_mean(x, n)
     parts = []
     if "ay" in rec.channels:
         parts.append(np.abs(smooth(rec.channels["ay"])))
