@@ -119,10 +119,11 @@ def demo(
     with output_dir(name) as d:
         say(f"1/3 simulating a {duration:g} s drive of the built-in vehicle with a concealed effect")
         truth = demo_recording(d, duration=duration, seed=seed)
+        rec, veh = _drive(d, name)
         say(f"2/3 identify: {rounds} rounds x {sims} simulations (stats embedding)")
         res = identify(
-            d / "recording.csv",
-            d / "vehicle.json",
+            rec,
+            veh,
             rounds=rounds,
             sims=sims,
             embedding="stats",
@@ -138,7 +139,7 @@ def demo(
         diagnosis = "skipped (--no-diagnose)"
         if run_diagnosis:
             say("3/3 diagnose: looking for missing physics")
-            diagnosis = _diagnosis(d, seed=seed, quiet=log is None, plots=not quick)
+            diagnosis = _diagnosis(d, rec, veh, seed=seed, quiet=log is None, plots=not quick)
         (d / "README.txt").write_text(
             "vdsbi demo\n"
             f"recording.csv, vehicle.json: a {duration:g} s simulated drive; truth.json holds the truth\n"
@@ -148,11 +149,18 @@ def demo(
     return DemoResult(name.resolve(), res, diagnosis, time.perf_counter() - t_start)
 
 
-def _diagnosis(d: Path, *, seed: int, quiet: bool, plots: bool) -> str:
+def _drive(d: Path, name: Path):
+    """The demo drive read from the working folder `d`, named by where it will end up (`name`,
+    as the user gave it), so that no written file mentions the temporary folder."""
+    from ..io import load_drive
+
+    rec, veh = load_drive(d / "recording.csv", d / "vehicle.json")
+    return dataclasses.replace(rec, source=str(name / "recording.csv")), veh
+
+
+def _diagnosis(d: Path, rec, veh, *, seed: int, quiet: bool, plots: bool) -> str:
     """Run the diagnosis on the demo drive into d/diagnose; what it found, in one line."""
-    dres = diagnose(
-        d / "recording.csv", d / "vehicle.json", d / "diagnose", seed=seed, quiet=quiet, plots=plots
-    )
+    dres = diagnose(rec, veh, d / "diagnose", seed=seed, quiet=quiet, plots=plots)
     chosen = ", ".join(dres.chosen) or "none"
     msg = f"mismatch detected: {dres.mismatch_detected}; effects named: {chosen}"
     msg += f" (concealed: {', '.join(CONCEALED)}); verdict: {dres.report['verdict']}"
