@@ -8,7 +8,10 @@ from ._road_bank import RoadBank as RoadBank
 from ._road_grade import RoadGrade as RoadGrade
 from ._rolling_resistance import RollingResistance as RollingResistance
 from ._sensor_bias import SensorBias as SensorBias
+from ._sensor_scale import SensorScale as SensorScale
+from ._signal_delay import SignalDelay as SignalDelay
 from ._steering_lag import SteeringLag as SteeringLag
+from ._torque_gain import TorqueGain as TorqueGain
 from ._torque_lag import TorqueLag as TorqueLag
 from ._tyre_friction import TyreFriction as TyreFriction
 from ._wheel_radius_error import WheelRadiusError as WheelRadiusError
@@ -68,5 +71,8 @@ for _cls in (
     SensorBias,
     WheelRadiusError,
     TyreFriction,
+    TorqueGain,
+    SignalDelay,
+    SensorScale,
 ):
     register_effect(_cls)
