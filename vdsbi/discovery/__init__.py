@@ -29,3 +29,9 @@ from ._rank import (
     verdict as verdict,
 )
 from ._report import REQUIRED_KEYS as REQUIRED_KEYS, write_report as write_report
+from ._search import ForwardSearch as ForwardSearch, Step as Step, forward_search as forward_search
+from ._terms import (
+    TermDiscovery as TermDiscovery,
+    discover_terms as discover_terms,
+    select_terms as select_terms,
+)

@@ -31,6 +31,7 @@ class EffectSpace:
         lo, hi: (E,) fit bounds of every effect parameter.
         null: (E,) values at which each effect vanishes.
         start: (E,) starting values when an effect is switched on.
+        classes: the effect classes by name (registered ones, or e.g. a discovered-term effect).
     """
 
     names: tuple[str, ...]
@@ -39,6 +40,7 @@ class EffectSpace:
     hi: np.ndarray
     null: np.ndarray
     start: np.ndarray
+    classes: dict = dataclasses.field(default_factory=dict)
 
     @property
     def num_params(self) -> int:
@@ -46,15 +48,18 @@ class EffectSpace:
 
     @property
     def max_pair_params(self) -> int:
-        """Most effect parameters a candidate may free at once (a pair of the largest two)."""
+        """Most effect parameters a candidate may free at once (a triple of the largest three:
+        the forward search selects up to three effects)."""
         sizes = sorted((s.stop - s.start for s in self.slices.values()), reverse=True)
-        return int(sum(sizes[:2]))
+        return int(sum(sizes[:3]))
 
 
-def effect_space(names: Sequence[str] | None = None) -> EffectSpace:
-    """`EffectSpace` of `names` (default: every registered effect), read from the registry."""
+def effect_space(names: Sequence[str] | None = None, extra: Sequence[type] = ()) -> EffectSpace:
+    """`EffectSpace` of `names` (default: every registered effect), read from the registry,
+    followed by the unregistered effect classes `extra` (e.g. `simulator.term_effect`)."""
     names = effect_names() if names is None else tuple(names)
-    classes = [EFFECTS[n] for n in names]
+    classes = [EFFECTS[n] for n in names] + list(extra)
+    names = names + tuple(c.name for c in extra)
     stops = np.cumsum([len(c.param_names) for c in classes]).astype(int)
     slices = {n: slice(int(b - len(c.param_names)), int(b)) for n, c, b in zip(names, classes, stops)}
     flat = lambda attr: np.array([x for c in classes for x in attr(c)], dtype=float)
@@ -65,6 +70,7 @@ def effect_space(names: Sequence[str] | None = None) -> EffectSpace:
         hi=flat(lambda c: [b[1] for b in c.bounds]),
         null=flat(lambda c: c.null),
         start=flat(lambda c: c.start),
+        classes=dict(zip(names, classes)),
     )
 
 
@@ -74,6 +80,10 @@ LOOKALIKE_GROUPS: tuple[tuple[str, ...], ...] = (
     ("road_grade", "rolling_resistance", "sensor_bias"),
     ("road_bank", "imu_misalignment"),
     ("steering_lag", "cornering_stiffness"),
+    # a delay of every input acts like a lag of each at low frequency
+    ("signal_delay", "steering_lag", "torque_lag"),
+    # each scales what the accelerometer reads or what drives it
+    ("sensor_scale", "torque_gain", "imu_misalignment"),
 )
 
 

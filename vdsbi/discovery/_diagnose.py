@@ -23,11 +23,13 @@ from ..diagnostics import Localisation, MisspecificationTest, locate_mismatch, m
 from ..io import Recording, read_recording, read_vehicle
 from ..problem import Problem, ProblemSettings, longitudinal_mode, make_problem
 from ..simulator import PARAM_NAMES, Vehicle
-from ._candidates import effect_names, effect_space, label, pair_candidates, single_candidates
+from ._candidates import effect_names, effect_space, label
 from ._data import compared_inputs, fit_data
 from ._fit import FitResult, Fitter
 from ._rank import STRONG, Ranked, choose, merge, rank, separability
 from ._report import build_report, write_report
+from ._search import Step, forward_search
+from ._terms import TermDiscovery, discover_terms
 
 IdentifyFn = Callable[[Fitter, tuple, "np.ndarray | None", int], FitResult]
 
@@ -63,6 +65,8 @@ class DiagnosisResult:
     localisation: Localisation
     predictions: dict
     residual_stretches: dict
+    terms: TermDiscovery | None = None
+    test_terms: MisspecificationTest | None = None
 
     @property
     def chosen(self) -> list[str]:
@@ -106,7 +110,9 @@ class DiagnoseSettings:
     Attributes:
         seed: seed of the simulated null of the misspecification test.
         alpha: level of the misspecification test.
-        top_pairs: pairs are fitted among this many best single effects.
+        max_effects: most effects the forward search selects (1: singles only).
+        top_pairs: 0 also restricts the search to single effects (the CLI's --top-pairs 0);
+            other values are ignored (the forward search replaced pairs among the top singles).
         candidates: effects to consider (default: every registered effect).
         longitudinal: "torque", "speed" or "auto" (see `vdsbi.problem.ProblemSettings`).
         max_window, max_windows: windows cut from the usable stretches (s, count; None: 20 s
@@ -118,12 +124,15 @@ class DiagnoseSettings:
         search_dt, final_dt: RK4 steps, s, of the candidate search and of the base/final fits
             (the test and the held-out comparison use the final step).
         identify_fn: `(fitter, effects, z0, max_iter) -> FitResult`; default MAP + Laplace.
+        max_terms: most candidate terms (`simulator.TERMS`) used to describe a mismatch the
+            chosen effects leave (p after the fix < alpha); 0: no term search.
         quiet: no progress lines.
         plots: write the figures (with `out_dir`).
     """
 
     seed: int = 0
     alpha: float = 0.05
+    max_effects: int = 3
     top_pairs: int = 3
     candidates: Sequence[str] | None = None
     longitudinal: str = "auto"
@@ -136,6 +145,7 @@ class DiagnoseSettings:
     search_dt: float = 0.005
     final_dt: float = 0.0025
     identify_fn: IdentifyFn | None = None
+    max_terms: int = 3
     quiet: bool = True
     plots: bool = True
 
@@ -166,7 +176,8 @@ class _Check(NamedTuple):
 class _Search(NamedTuple):
     fits: dict[tuple, FitResult]  # at the search step, () -> its own base fit
     ranked: list[Ranked]
-    pairs: list[tuple[str, ...]]
+    pairs: list[tuple[str, ...]]  # the sets of several effects fitted
+    steps: list[Step]
 
 
 class _Decision(NamedTuple):
@@ -250,36 +261,37 @@ def _held_out_predictions(fitter: Fitter, windows: Problem, base: FitResult, dec
 
 
 def _search(coarse: Fitter, base_c: FitResult, names: tuple[str, ...], s: DiagnoseSettings, say) -> _Search:
-    """Singles, then pairs among the best singles, all at the coarse step; every single
-    warm-starts from the base fit, every pair from its better member."""
-    fits: dict[tuple, FitResult] = {(): base_c}
-    for cand in single_candidates(names):
-        fits[cand] = s.identify(coarse, cand, base_c.z, s.single_iters)
-    singles = [r for r in rank(fits, base_c) if len(r.effects) == 1]
+    """Forward selection at the coarse step: singles from the base fit, then one effect at a
+    time added on the refitted set while the evidence gain is strong (`forward_search`)."""
+    most = 1 if s.top_pairs == 0 else s.max_effects
+    fit_fn = lambda cand, z0: s.identify(coarse, cand, z0, s.single_iters)
+    found = forward_search(fit_fn, base_c, names, most)
+    ranked = rank(found.fits, base_c)
+    singles = [r for r in ranked if len(r.effects) == 1]
     say("singles: " + ", ".join(f"{r.name} {r.score:.1f}" for r in singles[:5]))
-    pairs = pair_candidates([r.effects[0] for r in singles], top=s.top_pairs)
-    by_name = {r.effects[0]: r for r in singles}
-    for pair in pairs:
-        lead = max(pair, key=lambda e: by_name[e].score)
-        fits[pair] = s.identify(coarse, pair, fits[(lead,)].z, s.single_iters)
-    return _Search(fits, rank(fits, base_c), pairs)
+    for st in found.steps[1:]:
+        also = f" (as strong: {', '.join(st.ambiguous_with)})" if st.ambiguous_with else ""
+        say(f"add to {label(st.current)}: {st.added or 'nothing'}{also}")
+    multi = [e for e in found.fits if len(e) > 1]
+    return _Search(found.fits, ranked, multi, found.steps)
 
 
 def _decide(search: _Search, fitter: Fitter, base: FitResult, detected: bool, s: DiagnoseSettings, say):
     """The chosen explanation and its fit at the fine step."""
     ranked = search.ranked
     polished: dict[tuple, FitResult] = {(): base}
-    if detected and len(ranked[0].effects) == 2 and ranked[0].score >= STRONG:
-        # A pair wins the search: the search caps iterations and a pair starts where its
-        # lead single stopped, so polish the pair and both members at the fine step with
-        # the same budget before deciding between them.
-        pair = ranked[0].effects
-        for cand in [pair, (pair[0],), (pair[1],)]:
+    if detected and len(ranked[0].effects) >= 2 and ranked[0].score >= STRONG:
+        # Several effects win the search: the search caps iterations and a set starts where
+        # its subset stopped, so polish the set and its fitted subsets one smaller at the fine
+        # step with the same budget before deciding between them.
+        top = ranked[0].effects
+        subsets = [tuple(e for e in top if e != x) for x in top]
+        for cand in [top, *(c for c in subsets if c in search.fits)]:
             polished[cand] = s.identify(fitter, cand, search.fits[cand].z, s.final_iters)
         decision = rank(polished, base)
         chosen = choose(decision, detected)
-        say("pair check: " + ", ".join(f"{r.name} {r.score:.1f}" for r in decision))
-        # report the polished evidence for these three, so the ranking and choice agree
+        say("set check: " + ", ".join(f"{r.name} {r.score:.1f}" for r in decision))
+        # report the polished evidence for these, so the ranking and choice agree
         ranked = merge(ranked, decision)
     else:
         chosen = choose(ranked, detected)
@@ -293,6 +305,30 @@ def _decide(search: _Search, fitter: Fitter, base: FitResult, detected: bool, s:
     return _Decision(ranked, chosen, final)
 
 
+def _describe_remainder(
+    vehicle, fitter: Fitter, windows: Problem, decision: _Decision, after: _Check, s, say
+):
+    """Candidate terms for what the chosen effects leave, when the residual after the fix is
+    still inconsistent with noise (`discover_terms`), and the residual test of their refit."""
+    if s.max_terms <= 0 or after.test.p_value >= s.alpha:
+        return None, None
+    found = discover_terms(
+        vehicle,
+        fitter.data,
+        decision.final,
+        fitter,
+        decision.chosen,
+        max_terms=s.max_terms,
+        max_iter=s.final_iters,
+    )
+    for t in found.terms:
+        say(f"discovered term: {t['formula']}")
+    if found.fit is None:
+        say(f"no candidate term has strong evidence ({say.seconds:.0f} s)")
+        return found, None
+    return found, _check(found.fit, windows, s.seed + 2, s).test
+
+
 def diagnose(
     recording: Recording | str | os.PathLike,
     vehicle: Vehicle | str | os.PathLike,
@@ -304,7 +340,8 @@ def diagnose(
     """Find where a recording and the model disagree, name the missing physics and fix it.
 
     Stages: cut windows → fit the base model → test it for misspecification and locate the
-    mismatch → fit every candidate effect (and pairs of the best) → choose by evidence →
+    mismatch → fit every candidate effect, then add effects one at a time while the evidence
+    supports it (forward search, up to `max_effects`) → choose by evidence →
     test the fixed model and compare both on the held-out part → report.
 
     Args:
@@ -334,6 +371,10 @@ def diagnose(
         decision = _decide(search, fitter, base, detected, s, say)
         after = _check(decision.final, windows, s.seed + 1, s)
         predictions = _held_out_predictions(fitter, windows, base, decision)
+        terms, test_terms = _describe_remainder(vehicle, fitter, windows, decision, after, s, say)
+        if terms is not None and terms.fit is not None:
+            full = fit_data(windows, "valid", truncate=False)
+            predictions["after_terms"] = terms.fitter.predict(terms.fit.z, terms.effects, full)
         sep = separability(search.ranked, base_c)  # all at the search step, against its own none
     found = DiagnosisResult(
         report={},
@@ -346,10 +387,10 @@ def diagnose(
         localisation=loc,
         predictions=predictions,
         residual_stretches={"before": before.residual, "after": after.residual, "t": before.t},
+        terms=terms,
+        test_terms=test_terms,
     )
-    found.report = build_report(
-        found, recording, s, names, decision.chosen, search.pairs, sep, fitter, coarse
-    )
+    found.report = build_report(found, recording, s, names, decision.chosen, search, sep, fitter, coarse)
     found.report["seconds"] = say.seconds
     if out_dir is not None:
         write_report(found, Path(out_dir), plots=s.plots)

@@ -57,7 +57,11 @@ def super_model(vehicle: Vehicle, effects: EffectSpace, longitudinal: str = "tor
     """All candidate effects, in registry order. At their null values they vanish exactly
     (the lags' states are frozen and bypassed at τ = 0, so nothing stiff remains and a 5 ms
     RK4 step is stable; τ is bounded below by 5 ms when fitted: |λ|·h ≤ 1.2)."""
-    return make_model(vehicle, effects.names, longitudinal=longitudinal)
+    if all(n in EFFECTS for n in effects.names):
+        return make_model(vehicle, effects.names, longitudinal=longitudinal)
+    # unregistered effects (a discovered-term effect) are built from their classes
+    mods = tuple(effects.classes[n]() for n in effects.names)
+    return VehicleModel(vehicle=vehicle, effects=mods, longitudinal=longitudinal)
 
 
 class FitData(eqx.Module):
@@ -355,7 +359,7 @@ class Fitter:
         params, stds = {}, {}
         for e in effects:
             s = self.effects.slices[e]
-            names = EFFECTS[e].param_names
+            names = self.effects.classes[e].param_names
             params[e] = {n: float(v) for n, v in zip(names, eval_[s])}
             stds[e] = {n: float(v) for n, v in zip(names, esd[s])}
         return FitResult(

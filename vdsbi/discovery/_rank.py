@@ -7,10 +7,11 @@ Evidence: the BIC approximation of the log marginal likelihood relative to "none
 
 with k the number of effect parameters added and N the number of fitted residual entries
 (θ and initial speeds are common to all candidates and cancel): a log Bayes factor against
-"none". The ranking score adds the log prior odds: 0 for "none" and single effects, −3 for a
-pair (prior odds e⁻³ ≈ 1:20 against each pair — there are n(n−1)/2 pairs but n singles, and a pair
-must earn its second effect), so a pair ranks above its better member only if the data favour
-it strongly. Scores > 3 (posterior odds > 20:1 against "none") count as strong. Ranking
+"none". The ranking score adds the log prior odds: 0 for "none" and single effects, −3 for
+each effect beyond the first (prior odds e⁻³ ≈ 1:20 against each pair — there are n(n−1)/2 pairs
+but n singles, and a pair must earn its second effect; a triple its third), so a set ranks above
+its subset only if the data favour the extra effect strongly (the forward search's rule).
+Scores > 3 (posterior odds > 20:1 against "none") count as strong. Ranking
 confidence: posterior probabilities, exp(score) normalised over all fitted candidates. When the
 whitened residuals are correlated in time (coloured noise, real data) the χ² differences — and
 with them the odds — are overstated; the report says so.
@@ -56,7 +57,7 @@ def rank(fits: dict[tuple[str, ...], FitResult], base: FitResult) -> list[Ranked
     rows = []
     for effects, fit in fits.items():
         bf = 0.0 if not effects else bic_score(fit, base)
-        rows.append((effects, fit, bf, bf + (PAIR_LOG_PRIOR if len(effects) > 1 else 0.0)))
+        rows.append((effects, fit, bf, bf + PAIR_LOG_PRIOR * max(0, len(effects) - 1)))
     scores = np.array([s for *_, s in rows])
     p = np.exp(scores - scores.max())
     p /= p.sum()

@@ -11,11 +11,13 @@ import numpy as np
 
 from ..diagnostics import Localisation, MisspecificationTest
 from ..problem import Problem
-from ..simulator import CHANNELS, EFFECTS, PARAM_NAMES
-from ._candidates import all_pairs, label
+from ..simulator import CHANNELS, PARAM_NAMES
+from ._candidates import label
 from ._data import held_out_from
 from ._fit import FitResult, Fitter
 from ._rank import PAIR_LOG_PRIOR, STRONG, Ranked, verdict
+from ._search import describe
+from ._terms import terms_section
 
 if TYPE_CHECKING:  # annotations only (_diagnose imports this module)
     from ..io import Recording
@@ -65,7 +67,7 @@ def _at_bounds(fit: FitResult, fitter: Fitter, frac: float = 0.01) -> list[str]:
         if min(v - a, b - v) < frac * (b - a):
             out.append(n)
     for e, d in fit.effect_params.items():
-        for (k, v), (a, b) in zip(d.items(), EFFECTS[e].bounds):
+        for (k, v), (a, b) in zip(d.items(), fitter.effects.classes[e].bounds):
             if min(v - a, b - v) < frac * (b - a):
                 out.append(f"{e}.{k}")
     return out
@@ -81,7 +83,7 @@ def build_report(
     s: DiagnoseSettings,
     names: tuple[str, ...],
     chosen: tuple[str, ...],
-    pairs: list[tuple[str, ...]],
+    search,
     sep: list[dict],
     fitter: Fitter,
     coarse: Fitter,
@@ -96,6 +98,14 @@ def build_report(
     chi_a = float(np.mean([v["chi2_dof"] for v in fit_after.values()]))
     held_improved = bool(chi_a < chi_b) if chosen else None
     concl = verdict(detected, chosen, p_after, s.alpha, held_improved)
+    held_terms = None
+    if "after_terms" in found.predictions:
+        held_terms = _held_metrics(found.predictions["after_terms"], windows)
+    terms = terms_section(found, held_terms, chi_a, s.alpha)
+    fits = {"before": fit_before, "after": fit_after}
+    if "fit" in terms:
+        fits["after_terms"] = terms.pop("fit")
+    text = concl["text"] + (f"; {terms['sentence']}" if terms.get("sentence") else "")
     return {
         "source": str(recording.source),
         "mismatch_detected": detected,
@@ -107,14 +117,17 @@ def build_report(
         "chosen": list(chosen),
         "ranking_confidence": _confidence(ranked),
         "separability": sep,
-        "pairs_fitted": [label(p) for p in pairs],
-        "pairs_skipped": _pairs_skipped(s, names, pairs),
-        "fit": {"before": fit_before, "after": fit_after},
+        "pairs_fitted": [label(p) for p in search.pairs],
+        "pairs_skipped": _pairs_skipped(s, names, search.pairs),
+        "search_steps": describe(search.steps),
+        "ambiguous": _ambiguous(search.steps, chosen),
+        "fit": fits,
+        **terms,
         # Validation: does the chosen fix also improve the held-out part (mean χ²/dof over
         # channels)? If not, the effect is absorbing some other mismatch on the fitted part.
         "held_out_improved": held_improved,
         "explained": concl["explained"],
-        "verdict": concl["text"],
+        "verdict": text,
         "fit_train_chi2_dof": {"before": base.chi2_dof, "after": final.chi2_dof},
         "theta": {"before": _theta_dict(base.theta), "after": _theta_dict(final.theta)},
         "theta_std": {"before": _theta_dict(base.theta_std), "after": _theta_dict(final.theta_std)},
@@ -145,9 +158,21 @@ def _confidence(ranked: Sequence[Ranked]) -> dict:
 
 
 def _pairs_skipped(s: DiagnoseSettings, names: Sequence[str], pairs: Sequence[tuple[str, ...]]) -> str:
-    n = len(all_pairs())
-    text = f"pairs not among the top {s.top_pairs} single effects ({n - len(pairs)} of {n}) were not fitted"
+    text = (
+        f"forward search: effects added one at a time while the evidence gain is ≥ {STRONG:g} "
+        f"(up to {s.max_effects}); {len(pairs)} sets of several effects fitted"
+    )
     return text + ("" if s.candidates is None else f"; only {sorted(names)} were considered")
+
+
+def _ambiguous(steps, chosen: Sequence[str]) -> list[str]:
+    """Plain sentences for the chosen effects that a look-alike could replace on this drive."""
+    return [
+        f"{st.added} (added to {label(st.current)}, gain {st.gains[st.added]:.1f}) is not separable here "
+        "from " + ", ".join(f"{e} (gain {st.gains[e]:.1f})" for e in st.ambiguous_with)
+        for st in steps
+        if st.added in chosen and st.ambiguous_with
+    ]
 
 
 def _located(loc: Localisation, test: MisspecificationTest, windows: Problem) -> dict:
@@ -181,8 +206,8 @@ def _method(s: DiagnoseSettings, coarse: Fitter, fitter: Fitter) -> dict:
         "identification": "MAP (Levenberg–Marquardt, forward-mode Jacobian, float64) + Laplace covariance",
         "test": "max standardised low-band/high-band residual power ratio; null by simulated noise "
         f"through the linearised refit ({s.num_draws} draws)",
-        "evidence": "score = BIC log Bayes factor vs 'none' + log prior odds (pairs "
-        f"{PAIR_LOG_PRIOR:g}); strong if > {STRONG:g}",
+        "evidence": "score = BIC log Bayes factor vs 'none' + log prior odds "
+        f"({PAIR_LOG_PRIOR:g} per effect beyond the first); strong if > {STRONG:g}",
         "solver_dt_s": {"search": coarse.dt, "final": fitter.dt},
     }
 
@@ -239,6 +264,16 @@ def markdown(rep: dict) -> str:
         f"probability {rc['probability']:.3f}; log-evidence gap to {rc['next']}: "
         f"{rc['log_evidence_gap_to_next']:.1f}. {rep['pairs_skipped']}."
     )
+    for a in rep.get("ambiguous", []):
+        L.append(f"- ambiguous: {a}")
+    if rep.get("discovered_terms"):
+        L += ["", "## Outside the library: discovered terms", ""]
+        L.append("| term | coefficient ± std | RMS change of the fit |")
+        L.append("|---|---|---|")
+        for t in rep["discovered_terms"]:
+            rms = ", ".join(f"{c} {v:.3g}" for c, v in t["rms_change"].items() if v > 0)
+            L.append(f"| {t['formula']} | {t['coefficient']:.4g} ± {t['std']:.2g} | {rms} |")
+    L.append(f"\nExplanation: **{rep.get('explanation')}**.")
     L += ["", "## Look-alike effects", ""]
     for g in rep["separability"]:
         for p in g["pairs"]:
@@ -257,6 +292,11 @@ def markdown(rep: dict) -> str:
         L.append(
             f"| {ch} | {b['nrmse']:.4f} | {a['nrmse']:.4f} | {b['chi2_dof']:.3f} | {a['chi2_dof']:.3f} |"
         )
+    if "after_terms" in rep["fit"]:
+        L.append("")
+        after_t = rep["fit"]["after_terms"].items()
+        text = ", ".join(f"{ch} NRMSE {d['nrmse']:.4f}, χ²/dof {d['chi2_dof']:.3f}" for ch, d in after_t)
+        L.append(f"With the discovered terms: {text}.")
     L += ["", "## Parameters", ""]
     if rep.get("at_bounds"):
         L.append(

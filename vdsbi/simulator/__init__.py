@@ -8,10 +8,14 @@ from ._dynamics import (
 )
 from ._effects import (
     EFFECTS as EFFECTS,
+    TERMS as TERMS,
     AbstractEffect as AbstractEffect,
     Context as Context,
+    Term as Term,
     get_effect as get_effect,
     register_effect as register_effect,
+    term_effect as term_effect,
+    term_formula as term_formula,
 )
 from ._filter import Decimator as Decimator
 from ._inputs import Inputs as Inputs

@@ -4,6 +4,12 @@ from ._aero_drag import AeroDrag as AeroDrag
 from ._base import AbstractEffect as AbstractEffect, Context as Context
 from ._imu_lever_arm import ImuLeverArm as ImuLeverArm
 from ._imu_misalignment import ImuMisalignment as ImuMisalignment
+from ._missing_terms import (
+    TERMS as TERMS,
+    Term as Term,
+    term_effect as term_effect,
+    term_formula as term_formula,
+)
 from ._road_bank import RoadBank as RoadBank
 from ._road_grade import RoadGrade as RoadGrade
 from ._rolling_resistance import RollingResistance as RollingResistance
