@@ -85,6 +85,7 @@ def test_identify_writes_all_files(full_run):
     assert set(post["validation"]["posterior_mean"]["channels"]) == set(CHANNELS)
     assert post["settings"]["rounds"] == 2 and post["settings"]["sims_per_round"] == 100
     assert post["vdsbi_version"]
+    assert post["warnings"] == []  # a clean drive: no mass at the prior's edges, band covers it
     samples = pd.read_csv(full_run / "samples.csv")
     assert list(samples.columns) == list(PARAM_NAMES) and len(samples) == 200
     np.testing.assert_allclose(

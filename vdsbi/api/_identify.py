@@ -29,6 +29,7 @@ from ..problem import (
     validate,
     windowed_model,
 )
+from ._commands import diagnose_command
 from ._outputs import (
     CHECKPOINT,
     ESTIMATOR,
@@ -39,6 +40,7 @@ from ._outputs import (
     write_text_atomically,
 )
 from ._progress import Progress
+from ._trust import trust_warnings
 
 
 @dataclasses.dataclass
@@ -59,7 +61,8 @@ class IdentifyResult:
 
     def table(self) -> str:
         """Per-parameter mean, std and 5/50/95 % quantiles as aligned text; a parameter the drive
-        cannot inform is printed as "not identified" with its prior range, never as an estimate."""
+        cannot inform is printed as "not identified" with its prior range, never as an estimate;
+        then one line per warning (posterior not to be trusted)."""
         width = max(10, *(len(n) for n in self.summary["parameters"]))
         rows = [f"{'param':<{width}} {'mean':>11} {'std':>10} {'q05':>11} {'q50':>11} {'q95':>11}"]
         for name, p in self.summary["parameters"].items():
@@ -71,6 +74,7 @@ class IdentifyResult:
                 f"{name:<{width}} {p['mean']:>11.4g} {p['std']:>10.3g} "
                 f"{p['q05']:>11.4g} {p['q50']:>11.4g} {p['q95']:>11.4g}"
             )
+        rows += [f"WARNING: {w['message']}" for w in self.summary.get("warnings", ())]
         return "\n".join(rows)
 
     def to_json(self) -> str:
@@ -100,6 +104,7 @@ def identify(
     rate: float = 200.0,
     on_round_end: Callable | None = None,
     log: Callable[[str], None] | None = None,
+    names: tuple[Any, Any, Any] | None = None,
 ) -> IdentifyResult:
     """Posterior over θ (and enabled effects' parameters) from a whole drive.
 
@@ -133,6 +138,8 @@ def identify(
         progress: tqdm bars.
         on_round_end: extra hook called with the APT state after each round's checkpoint.
         log: where one-line messages go (default: nowhere).
+        names: (recording, vehicle, out_dir) as the user knows them, for the files and the
+            commands the result names (default: the arguments as given).
 
     Raises:
         InputError: bad recording, vehicle, settings, a non-empty `out_dir` without `resume`, or
@@ -159,6 +166,9 @@ def identify(
         summary["validation"] = _validation(prob, summary, effects, compare)
         ppc = posterior_predictive(k_ppc, prob, samples, effects, ppc_draws)
         summary["ppc"] = _ppc_summary(prob, ppc)
+        summary["warnings"] = _warnings(
+            samples, summary, box, names or (recording, vehicle, out_dir), longitudinal
+        )
         result = IdentifyResult(posterior, samples, summary, out)
         if out is not None:
             write_outputs(out, result, prob, ppc)
@@ -336,6 +346,23 @@ def _summary(prob: Problem, samples: np.ndarray, state, run_info: dict, box, eff
         "settings": run_info["settings"],
         "rounds": [{k: v for k, v in h.items() if isinstance(v, (int, float, str))} for h in state.history],
     }
+
+
+def _warnings(samples: np.ndarray, summary: dict, box, names, longitudinal: str) -> list[dict[str, Any]]:
+    """posterior.json's `warnings`: mass piled at the prior's edges, or a predictive band that
+    misses the recording, each pointing to `vdsbi diagnose`."""
+    rec, veh, out = (n if isinstance(n, (str, os.PathLike)) else None for n in names)
+    if rec is None:
+        rec = summary["recording"]
+    ppc = summary["ppc"]
+    return trust_warnings(
+        samples,
+        list(summary["parameters"]),
+        box,
+        summary["not_identified"],
+        {"train": ppc["fraction_inside_90pct_band"], "held_out": ppc["fraction_inside_90pct_band_held_out"]},
+        diagnose_command(rec, veh, out, longitudinal),
+    )
 
 
 def _validation(prob: Problem, summary: dict, effects, compare) -> dict[str, Any]:

@@ -84,7 +84,10 @@ def run(args) -> int:
         progress=not quiet and sys.stderr.isatty(),
         log=None if quiet else (lambda s: print(s, flush=True)),
     )
-    if not quiet:
+    if quiet:
+        for w in res.summary["warnings"]:
+            print(f"vdsbi: warning: {w['message']}", file=sys.stderr)
+    else:
         print(res.table())
         print(f"wrote {args.out}/posterior.json, samples.csv, pairplot.png, ppc.png, {api.ESTIMATOR}")
     return 0
