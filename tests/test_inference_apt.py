@@ -71,6 +71,23 @@ def test_atomic_loss_hand_computed():
     np.testing.assert_allclose(float(got_c), expected_c, rtol=1e-6)
 
 
+def test_atomic_loss_module_matches_reference_kernel(getkey):
+    # AtomicLoss evaluates the B·K pairs in one flat vmap; it must equal the per-row kernel.
+    theta, x, flow, _ = _tiny_problem(getkey, 32)
+    key = getkey()
+    mask = np.arange(32) % 3 == 0
+    for combined in (False, True):
+        got = AtomicLoss(num_atoms=5, combined=combined)(flow, theta, x, mask, key)
+        want = atomic_apt_loss(
+            lambda t, i: flow.log_prob(t, jnp.asarray(x)[i]),
+            flow.prior.log_prob,
+            jnp.asarray(theta),
+            atom_indices(key, 32, 5),
+            mask if combined else None,
+        )
+        np.testing.assert_allclose(float(got), float(want), rtol=1e-5)
+
+
 def _tiny_problem(getkey, n):
     """n prior draws with their simulations, a TINY flow built on them, and an optimiser."""
     prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
