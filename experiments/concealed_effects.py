@@ -21,8 +21,19 @@ Generator (documented so the ranges can be judged):
   * simulated with the simulator's default solver (RK4, 2.5 ms), or with ``--generator adaptive``
     by diffrax Tsit5 at rtol = atol = 1e-9 (numerics independent of the diagnosis's RK4).
 
+Suites (``--suite``):
+  * library (default): one effect of the library per recording (``--per-effect`` each), clean
+    ones, and ``--pairs`` random pairs;
+  * multi: the fixed pairs and triples of `MULTI` (including the pairs the old search, pairs
+    among the three best singles, missed), drawn as above;
+  * outside: physics outside the library made by `outside_physics.py` (its docstring documents
+    the generator), one recording per kind, plus ``--clean`` clean ones; scored by whether the
+    tool named a right library effect or described it by a right discovered term
+    (`outside_physics.RIGHT`).
+
 Usage:
-    python experiments/concealed_effects.py [--quick] [--data DIR] [--out DIR] [--per-effect 3]
+    python experiments/concealed_effects.py [--quick] [--suite library|multi|outside]
+        [--data DIR] [--out DIR] [--per-effect 3]
 
 Partial results are written after every recording; a restart skips finished recordings.
 """
@@ -42,6 +53,9 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "experiments"))
+
+import outside_physics  # noqa: E402
 
 from vdsbi.discovery import diagnose, effect_names  # noqa: E402
 from vdsbi.simulator import (  # noqa: E402
@@ -97,7 +111,23 @@ def case_list(per_effect: int, clean: int, pairs: int, seed: int):
     return cases
 
 
-def make_case(i: int, effects: tuple, seed: int, duration: float, folder: Path, solver=None):
+#: The multi suite: pairs (the first three are those the pair search among the top three singles
+#: missed or was tested on) and triples.
+MULTI = (
+    ("aero_drag", "imu_lever_arm"),
+    ("imu_misalignment", "wheel_radius_error"),
+    ("aero_drag", "imu_misalignment"),
+    ("sensor_bias", "wheel_radius_error"),
+    ("road_grade", "steering_lag"),
+    ("torque_gain", "sensor_scale"),
+    ("rolling_resistance", "road_bank", "steering_lag"),
+    ("aero_drag", "imu_lever_arm", "sensor_bias"),
+)
+
+
+def make_case(i: int, effects: tuple, seed: int, duration: float, folder: Path, solver=None, kind=None):
+    """Write recording.csv, vehicle.json and truth.json of case i; `kind` (outside suite) is
+    physics outside the library (`outside_physics`), applied on top of `effects`."""
     rng = np.random.default_rng([seed, i])
     d = default_vehicle()
     consts = {k: float(getattr(d, k)) for k in VEHICLE_KEYS}
@@ -125,10 +155,13 @@ def make_case(i: int, effects: tuple, seed: int, duration: float, folder: Path, 
         key = jax.random.key(int(rng.integers(2**31)))
         inputs = random_profile(key, duration)
         v0 = float(rng.uniform(12, 25))
-        with jax.enable_x64(True):
+        acting = inputs if kind is None else outside_physics.applied_inputs(kind, inputs)
+        with jax.enable_x64(True), outside_physics.patched_tyres(kind, consts["mass"]):
             ys, ok = simulate(
-                theta, inputs, veh, v0=v0, effects=list(effects), effect_params=params, **solver_kw
+                theta, acting, veh, v0=v0, effects=list(effects), effect_params=params, **solver_kw
             )
+        if kind is not None:
+            ys = outside_physics.recorded_readings(kind, ys, float(inputs.dt))
         if ok and np.all(np.isfinite(ys)) and ys[:, 5].min() > 4.0 and np.abs(ys[:, 3:5]).max() < 250:
             break
     else:
@@ -145,6 +178,7 @@ def make_case(i: int, effects: tuple, seed: int, duration: float, folder: Path, 
     pd.DataFrame(cols).to_csv(folder / "recording.csv", index=False, float_format="%.10g")
     (folder / "vehicle.json").write_text(json.dumps(veh.to_dict(), indent=2))
     truth = {
+        "outside": kind,
         "effects": list(effects),
         "params": params,
         "theta": dict(zip(PARAM_NAMES, theta.tolist())),
@@ -168,7 +202,18 @@ def score(truth: dict, rep: dict, seconds: float) -> dict:
             ev = np.array([est[k] for k in truth["params"][e]])
             mag[e] = float(np.linalg.norm(ev - tv) / np.linalg.norm(tv))
     before, after = rep["fit"]["before"], rep["fit"]["after"]
+    fixed = rep["fit"].get("after_terms", after)  # after the library fix and any discovered term
+    terms = [{"key": t["key"], "formula": t["formula"]} for t in rep.get("discovered_terms", [])]
     return {
+        "outside": truth.get("outside"),
+        "explanation": rep.get("explanation"),
+        "terms": terms,
+        "right_physics": right_physics(truth, chosen, terms),
+        "ambiguous": rep.get("ambiguous", []),
+        "search_steps": rep.get("search_steps"),
+        "verdict": rep.get("verdict"),
+        "heldout_chi2_fixed": {c: v["chi2_dof"] for c, v in fixed.items()},
+        "max_chi2_fixed": max(v["chi2_dof"] for v in fixed.values()),
         "truth": list(t_eff),
         "detected": rep["mismatch_detected"],
         "p_value": rep["p_value"],
@@ -192,6 +237,61 @@ def score(truth: dict, rep: dict, seconds: float) -> dict:
         "separability": rep["separability"],
         "seconds": seconds,
     }
+
+
+def right_physics(truth: dict, chosen, terms) -> bool:
+    """Library cases: the chosen effects are the truth. Outside cases: a right library effect
+    was named or a right term discovered (`outside_physics.RIGHT`)."""
+    kind = truth.get("outside")
+    if kind is None:
+        return set(chosen) == set(truth["effects"])
+    lib, right_terms = outside_physics.RIGHT[kind]
+    return bool(set(chosen) & lib or {t["key"] for t in terms} & right_terms)
+
+
+def summarise_outside(results: list[dict]) -> dict:
+    """Figures of the outside suite (recordings with physics outside the library)."""
+    out = [r for r in results if r.get("outside")]
+    clean = [r for r in results if not r.get("outside") and not r["truth"]]
+    frac = lambda a, b: (a / b) if b else None
+    claims = [r for r in out if r["explanation"] == "library"]
+    return {
+        "n_outside": len(out),
+        "detection_rate": frac(sum(r["detected"] for r in out), len(out)),
+        "false_alarms": f"{sum(r['detected'] for r in clean)} of {len(clean)}",
+        "terms_on_clean": sum(bool(r["terms"]) for r in clean),
+        "right_physics_named_or_described": frac(sum(r["right_physics"] for r in out), len(out)),
+        "library_claims_with_heldout_chi2_le_1.1": f"{sum(r['max_chi2_after'] <= 1.1 for r in claims)} of {len(claims)}",
+        "heldout_chi2_fixed_le_1.2": frac(sum(r["max_chi2_fixed"] <= 1.2 for r in out), len(out)),
+        "explanations": {
+            k: sum(r["explanation"] == k for r in out)
+            for k in ("library", "discovered term", "unexplained", "none")
+        },
+        "seconds_max": max((r["seconds"] for r in results), default=None),
+    }
+
+
+def markdown_outside(results: list[dict], summary: dict) -> str:
+    L = ["# Physics outside the library: what the tool named or wrote", ""]
+    L.append(
+        "Generated by `experiments/concealed_effects.py --suite outside` (generator: `experiments/outside_physics.py`)."
+    )
+    L += ["", "| figure | measured |", "|---|---|"]
+    L += [f"| {k} | {v} |" for k, v in summary.items()]
+    L += [
+        "",
+        "| truth | detected (p) | chosen (library) | discovered term(s) | explanation | right | held-out max χ²/dof before → library → with terms | s |",
+    ]
+    L.append("|---|---|---|---|---|---|---|---|")
+    for r in results:
+        truth = r.get("outside") or "+".join(r["truth"]) or "clean"
+        terms = "; ".join(t["formula"] for t in r["terms"]) or "—"
+        L.append(
+            f"| {truth} | {r['detected']} ({r['p_value']:.3g}) | {'+'.join(r['chosen']) or 'none'} | {terms} | "
+            f"{r['explanation']} | {r['right_physics']} | {max(r['heldout_chi2_before'].values()):.2f} → "
+            f"{r['max_chi2_after']:.2f} → {r['max_chi2_fixed']:.2f} | {r['seconds']:.0f} |"
+        )
+    return "\n".join(L) + "\n"
 
 
 def summarise(results: list[dict]) -> dict:
@@ -236,6 +336,19 @@ def summarise(results: list[dict]) -> dict:
         "named_accuracy_single": frac(sum(r["named_correct"] for r in singles), len(singles)),
         "pairs_both_named": f"{sum(r['named_correct'] for r in pairs)} of {len(pairs)}",
         "pairs": [{"truth": r["truth"], "chosen": r["chosen"], "top1": r["top1"]} for r in pairs],
+        "triples_all_named": f"{sum(r['named_correct'] for r in results if len(r['truth']) == 3)} of "
+        f"{sum(len(r['truth']) == 3 for r in results)}",
+        "multi": [
+            {
+                "truth": r["truth"],
+                "chosen": r["chosen"],
+                "ambiguous": r.get("ambiguous", []),
+                "max_chi2_after": r["max_chi2_after"],
+                "seconds": r["seconds"],
+            }
+            for r in results
+            if len(r["truth"]) >= 2
+        ],
         "magnitude_within_25pct": frac(
             sum(m is not None and m <= 0.25 for r in eff_cases for m in r["magnitude_rel_error"].values()),
             sum(len(r["magnitude_rel_error"]) for r in eff_cases),
@@ -285,6 +398,17 @@ def markdown(summary: dict, targets: dict) -> str:
         L.append(
             f"- truth {'+'.join(p['truth'])}: chosen {'+'.join(p['chosen']) or 'none'}, top-1 {'+'.join(p['top1']) or 'none'}"
         )
+    if summary.get("multi"):
+        L += ["", "## Several effects (forward search)", ""]
+        L.append("| truth | chosen | all named | ambiguity reported | held-out max χ²/dof after | s |")
+        L.append("|---|---|---|---|---|---|")
+        for m in summary["multi"]:
+            ok = set(m["truth"]) == set(m["chosen"])
+            amb = "; ".join(m["ambiguous"]) or "—"
+            L.append(
+                f"| {'+'.join(m['truth'])} | {'+'.join(m['chosen']) or 'none'} | {ok} | {amb} | "
+                f"{m['max_chi2_after']:.2f} | {m['seconds']:.0f} |"
+            )
     L += ["", "## Confusion matrix (truth → chosen)", ""]
     for t, row in summary["confusion_matrix"].items():
         L.append(f"- {t}: " + ", ".join(f"{c} ×{n}" for c, n in sorted(row.items(), key=lambda x: -x[1])))
@@ -307,6 +431,43 @@ TARGETS = {
 }
 
 
+def plan(args):
+    """(cases [(effects, outside kind or None)], duration s, diagnose options, results name)."""
+    if args.quick:
+        # Quick: 8 s, one RK4 step (5 ms) throughout, so one set of compiled kernels serves all,
+        # and the search restricted to a few effects.
+        kw = {"num_draws": 100, "final_dt": 0.005}
+        if args.suite == "outside":
+            kw["candidates"] = ("sensor_bias", "sensor_scale", "imu_misalignment")
+            return [((), None), ((), "gyro_scale")], 8.0, kw, "concealed_effects_outside_quick"
+        if args.suite == "multi":
+            kw["candidates"] = ("road_grade", "rolling_resistance", "sensor_bias", "wheel_radius_error")
+            return [(("sensor_bias", "wheel_radius_error"), None)], 8.0, kw, "concealed_effects_multi_quick"
+        kw["candidates"] = ("road_grade", "rolling_resistance", "imu_misalignment", "sensor_bias")
+        kw["top_pairs"] = 2
+        return [((), None), (("sensor_bias",), None)], 8.0, kw, "concealed_effects_quick"
+    if args.suite == "multi":
+        return [(e, None) for e in MULTI], 20.0, {}, "concealed_effects_multi"
+    if args.suite == "outside":
+        cases = [((), None)] * args.clean + [((), k) for k in outside_physics.KINDS]
+        return cases, 20.0, {}, "concealed_effects_outside"
+    cases = case_list(args.per_effect, args.clean, args.pairs, args.seed)
+    return [(e, None) for e in cases], 20.0, {}, "concealed_effects"
+
+
+def write_results(results: list[dict], planned: int, out: Path, name: str, suite: str) -> None:
+    summary = summarise([r for r in results if not r.get("outside")])
+    if suite == "outside":
+        summary = summarise_outside(results)
+    summary["complete"] = len(results) == planned
+    summary["cases_planned"] = planned
+    (out / f"{name}.json").write_text(
+        json.dumps({"summary": summary, "cases": results}, indent=1, default=float)
+    )
+    text = markdown_outside(results, summary) if suite == "outside" else markdown(summary, TARGETS)
+    (out / f"{name}.md").write_text(text)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument(
@@ -327,25 +488,16 @@ def main(argv=None) -> int:
         "diffrax Tsit5 at rtol = atol = 1e-9, so the recordings do not share the diagnosis's "
         "discretisation",
     )
+    ap.add_argument("--suite", choices=("library", "multi", "outside"), default="library")
     args = ap.parse_args(argv)
     jax.config.update("jax_compilation_cache_dir", str(Path(args.data).parent / "vdsbi_jax_cache"))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 2.0)
     data = Path(args.data) / ("quick" if args.quick else "full")
+    if args.suite != "library":
+        data = data.with_name(f"{data.name}_{args.suite}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    if args.quick:
-        # Quick: 8 s, one RK4 step (5 ms) throughout, so one set of compiled kernels serves all.
-        cases, duration, name = [(), ("sensor_bias",)], 8.0, "concealed_effects_quick"
-        # and the search is restricted to sensor_bias and its look-alikes (plus one pair).
-        kw = {
-            "num_draws": 100,
-            "final_dt": 0.005,
-            "candidates": ("road_grade", "rolling_resistance", "imu_misalignment", "sensor_bias"),
-            "top_pairs": 2,
-        }
-    else:
-        cases = case_list(args.per_effect, args.clean, args.pairs, args.seed)
-        duration, kw, name = 20.0, {}, "concealed_effects"
+    cases, duration, kw, name = plan(args)
     solver = None
     if args.generator == "adaptive":
         solver = Solver(dt=None, rtol=1e-9, atol=1e-9)
@@ -353,14 +505,15 @@ def main(argv=None) -> int:
     if args.limit:
         cases = cases[: args.limit]
     results = []
-    for i, effects in enumerate(cases):
-        folder = data / f"case_{i:03d}_{'+'.join(effects) or 'none'}"
+    for i, (effects, kind) in enumerate(cases):
+        tag = f"outside_{kind}" if kind else "+".join(effects) or "none"
+        folder = data / f"case_{i:03d}_{tag}"
         done = folder / "result.json"
         if done.exists():
             results.append(json.loads(done.read_text()))
             continue
         if not (folder / "recording.csv").exists():
-            make_case(i, effects, args.seed, duration, folder, solver)
+            make_case(i, effects, args.seed, duration, folder, solver, kind)
         t0 = time.perf_counter()
         try:
             res = diagnose(folder / "recording.csv", folder / "vehicle.json", plots=False, **kw)
@@ -383,14 +536,10 @@ def main(argv=None) -> int:
             f"chi2 {r['mean_chi2_before']:.2f}->{r['mean_chi2_after']:.2f} ({secs:.0f} s)",
             flush=True,
         )
-        summary = summarise(results)
-        summary["complete"] = len(results) == len(cases)
-        summary["cases_planned"] = len(cases)
-        (out / f"{name}.json").write_text(
-            json.dumps({"summary": summary, "cases": results}, indent=1, default=float)
-        )
-        (out / f"{name}.md").write_text(markdown(summary, TARGETS))
-    if results:
+        write_results(results, len(cases), out, name, args.suite)
+    if results and args.suite == "outside":
+        print(json.dumps(summarise_outside(results), indent=1))
+    elif results:
         s = summarise(results)
         print(json.dumps({k: s[k] for k in TARGETS if k in s}, indent=1))
     return 0
