@@ -18,7 +18,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
-from ._candidates import effect_names, label
+from ._candidates import label
 from ._fit import FitResult
 from ._rank import STRONG, bic_score
 
@@ -39,9 +39,9 @@ class ForwardSearch(NamedTuple):
     selected: tuple[str, ...]
 
 
-def _ordered(effects) -> tuple[str, ...]:
-    order = effect_names()
-    return tuple(sorted(effects, key=order.index))
+def _ordered(effects, names: Sequence[str]) -> tuple[str, ...]:
+    """In the candidates' (registry) order, so a set has one key whatever the path to it."""
+    return tuple(sorted(effects, key=list(names).index))
 
 
 def _step(current, names, fits, fit_fn) -> Step:
@@ -49,7 +49,7 @@ def _step(current, names, fits, fit_fn) -> Step:
     for e in names:
         if e in current:
             continue
-        cand = _ordered(current + (e,))
+        cand = _ordered(current + (e,), names)
         if cand not in fits:
             fits[cand] = fit_fn(cand, fits[current].z)
         gains[e] = float(bic_score(fits[cand], fits[current]))
@@ -87,7 +87,7 @@ def forward_search(
         steps.append(step)
         if step.added is None:
             break
-        current = _ordered(current + (step.added,))
+        current = _ordered(current + (step.added,), names)
     return ForwardSearch(fits, steps, current)
 
 

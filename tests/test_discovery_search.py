@@ -1,0 +1,62 @@
+"""The forward search adds effects one at a time while the evidence gain is strong, finds a weak
+effect that a strong one hides among the singles, stops at the limit, and reports look-alikes."""
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from vdsbi.discovery import forward_search, rank
+
+N = 10_000
+PENALTY = 0.5 * np.log(N)  # BIC cost of one parameter, in log-evidence
+
+
+def _fake_fits(explained: dict[str, float], extra: dict[frozenset, float] | None = None):
+    """fit_fn for a toy world: each effect lowers χ² by its own amount (additively), each
+    has one parameter; `extra` adds interactions for every set containing the given ones."""
+    extra = extra or {}
+
+    def fit_fn(effects, z0):
+        gain = sum(explained.get(e, 0.0) for e in effects)
+        gain += sum(v for k, v in extra.items() if k <= set(effects))
+        return SimpleNamespace(chi2=5000.0 - gain, num_params=6 + len(effects), num_samples=N, z=None)
+
+    return fit_fn, fit_fn((), None)
+
+
+def _chi2_for(log_evidence: float) -> float:
+    """The χ² drop that gives one added parameter this log Bayes factor."""
+    return 2 * (log_evidence + PENALTY)
+
+
+def test_weak_effect_hidden_among_singles_is_added_after_the_strong_one():
+    # "b" alone ranks below decoys that mimic part of "a"; on the refitted "a" model only b helps
+    explained = {"a": _chi2_for(400), "b": _chi2_for(5), "c": _chi2_for(30)}
+    # c is a look-alike of a: once a is in, c adds nothing (their drops overlap)
+    overlap = {frozenset({"a", "c"}): -_chi2_for(30) - 2 * PENALTY}
+    fit_fn, base = _fake_fits(explained, overlap)
+    found = forward_search(fit_fn, base, ("a", "b", "c", "d"), max_effects=3)
+    assert found.selected == ("a", "b")
+    assert [s.added for s in found.steps] == ["a", "b", None]
+    assert found.steps[1].gains["b"] > 3 > found.steps[1].gains["c"]
+    ranked = rank(found.fits, base)
+    assert ranked[0].effects == ("a", "b")  # the prior −3 per extra effect agrees with the search
+
+
+def test_stops_at_the_limit_and_when_nothing_is_strong():
+    explained = {"a": _chi2_for(50), "b": _chi2_for(40), "c": _chi2_for(30), "d": _chi2_for(20)}
+    fit_fn, base = _fake_fits(explained)
+    assert forward_search(fit_fn, base, tuple(explained), max_effects=2).selected == ("a", "b")
+    assert forward_search(fit_fn, base, tuple(explained), max_effects=1).selected == ("a",)
+    fit_fn, base = _fake_fits({"a": _chi2_for(2.0)})
+    found = forward_search(fit_fn, base, ("a", "b"), max_effects=3)
+    assert found.selected == () and found.steps[0].added is None
+
+
+def test_look_alikes_are_reported_as_ambiguous():
+    explained = {"a": _chi2_for(20), "b": _chi2_for(19)}  # gains within 3 of each other
+    overlap = {frozenset({"a", "b"}): -_chi2_for(19)}  # together no better than one
+    fit_fn, base = _fake_fits(explained, overlap)
+    found = forward_search(fit_fn, base, ("a", "b"), max_effects=3)
+    assert found.selected == ("a",)
+    assert found.steps[0].ambiguous_with == ["b"]
