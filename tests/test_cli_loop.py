@@ -91,3 +91,28 @@ def test_identify_with_the_effect_recovers_the_bias(effect_run):
     assert {"sensor_bias.ax", "sensor_bias.ay", "sensor_bias.yaw_rate"} <= set(samples.columns)
     # With the bias modelled the recording falls inside the predictive band again.
     assert not [w for w in post["warnings"] if w["kind"] == "predictive_miss"]
+
+
+@pytest.fixture(scope="module")
+def diagnosis(biased, tmp_path_factory):
+    """`vdsbi diagnose` on the biased drive, searching two effects only (cheap)."""
+    out = tmp_path_factory.mktemp("loop") / "diag"
+    rec, veh = biased
+    args = ["diagnose", str(rec), "--vehicle", str(veh), "--out", str(out), "--final-dt", "0.005"]
+    return out, [*args, "--effects", "sensor_bias,road_grade", "--top-pairs", "0"]
+
+
+def test_diagnose_ends_with_the_identify_command_that_models_what_it_named(biased, diagnosis, capsys):
+    import shlex
+
+    from vdsbi.cli import build_parser
+
+    out, args = diagnosis
+    assert main(args) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    rec, veh = biased
+    assert last == f"vdsbi identify {rec} --vehicle {veh} --out {out}-identify --effects sensor_bias"
+    parsed = build_parser().parse_args(shlex.split(last)[1:])
+    assert parsed.effects == "sensor_bias" and parsed.recording == str(rec)
+    assert last in (out / "report.md").read_text()
+    assert json.loads((out / "report.json").read_text())["identify_command"] == last

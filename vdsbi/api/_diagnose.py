@@ -1,10 +1,44 @@
-"""`diagnose`: find, name and fix model mismatch (`vdsbi.discovery.diagnose`)."""
+"""`diagnose`: find, name and fix model mismatch (`vdsbi.discovery.diagnose`), and say which
+`identify` command models what it named."""
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+from typing import Any
 
-def diagnose(*args, **kwargs):
-    """`vdsbi.discovery.diagnose`, imported on first use (it pulls in the discovery layer)."""
-    from ..discovery import diagnose as _diagnose
+from ._commands import identify_command
 
-    return _diagnose(*args, **kwargs)
+
+def diagnose(
+    recording,
+    vehicle,
+    out_dir: str | os.PathLike | None = None,
+    *,
+    names: tuple[Any, Any, Any] | None = None,
+    **options,
+):
+    """`vdsbi.discovery.diagnose` (imported on first use: it pulls in the discovery layer), with
+    `report["identify_command"]`: the `vdsbi identify … --effects NAMES` that models the effects
+    it chose, written into report.json and report.md.
+
+    Args:
+        recording, vehicle, out_dir, **options: as `vdsbi.discovery.diagnose`.
+        names: (recording, vehicle, out_dir) as the user knows them, for the command (default:
+            the arguments as given).
+    """
+    from ..discovery import diagnose as _diagnose, write_report
+
+    found = _diagnose(recording, vehicle, None, **options)
+    rec, veh, out = (
+        n if isinstance(n, (str, os.PathLike)) else None for n in (names or (recording, vehicle, out_dir))
+    )
+    if rec is None:
+        rec = found.report["source"]
+    found.report["identify_command"] = identify_command(
+        rec, veh, out, found.report["chosen"], options.get("longitudinal", "auto")
+    )
+    if out_dir is not None:
+        plots = options.get("plots", getattr(options.get("settings"), "plots", True))
+        write_report(found, Path(out_dir), plots=plots)
+    return found

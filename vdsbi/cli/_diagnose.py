@@ -66,6 +66,7 @@ def run(args) -> int:
             final_dt=args.final_dt,
             quiet=args.quiet,
             plots=not args.no_plots,
+            names=(args.recording, args.vehicle, args.out),
         )
     rep = res.report
     if not args.quiet:
@@ -75,5 +76,7 @@ def run(args) -> int:
         for ch, b in rep["fit"]["before"].items():
             a = rep["fit"]["after"][ch]
             print(f"  {ch:12s} held-out χ²/dof {b['chi2_dof']:8.3f} -> {a['chi2_dof']:8.3f}")
-        print(f"wrote {args.out}/report.json, report.md")
+        print(f"wrote {args.out}/report.json, report.md, report.html")
+        print("next, the posterior with what was named modelled:")
+    print(rep["identify_command"])
     return 0

@@ -319,6 +319,15 @@ def markdown(rep: dict) -> str:
     if rep["recording_warnings"]:
         L += ["", "Recording warnings:"] + [f"- {w}" for w in rep["recording_warnings"]]
     L.append(f"\nTook {rep['seconds']:.0f} s.")
+    if rep.get("identify_command"):
+        L += [
+            "",
+            "## Next",
+            "",
+            "The posterior with what was named modelled:",
+            "",
+            f"    {rep['identify_command']}",
+        ]
     return "\n".join(L) + "\n"
 
 
