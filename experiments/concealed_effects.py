@@ -92,9 +92,9 @@ def draw_effect(rng, name):
     return out
 
 
-def case_list(per_effect: int, clean: int, pairs: int, seed: int):
+def case_list(per_effect: int, clean: int, pairs: int, seed: int, only=None):
     rng = np.random.default_rng(seed)
-    names = effect_names()
+    names = effect_names() if not only else tuple(only)
     all_pairs = [(a, b) for i, a in enumerate(names) for b in names[i + 1 :]]
     pair_idx = rng.choice(len(all_pairs), size=pairs, replace=False)
     cases = []
@@ -451,8 +451,9 @@ def plan(args):
     if args.suite == "outside":
         cases = [((), None)] * args.clean + [((), k) for k in outside_physics.KINDS]
         return cases, 20.0, {}, "concealed_effects_outside"
-    cases = case_list(args.per_effect, args.clean, args.pairs, args.seed)
-    return [(e, None) for e in cases], 20.0, {}, "concealed_effects"
+    cases = case_list(args.per_effect, args.clean, args.pairs, args.seed, args.only)
+    name = "concealed_effects" if not args.only else "concealed_effects_" + "_".join(args.only)
+    return [(e, None) for e in cases], 20.0, {}, name
 
 
 def write_results(results: list[dict], planned: int, out: Path, name: str, suite: str) -> None:
@@ -489,6 +490,7 @@ def main(argv=None) -> int:
         "discretisation",
     )
     ap.add_argument("--suite", choices=("library", "multi", "outside"), default="library")
+    ap.add_argument("--only", nargs="+", default=None, help="library suite: only these effects")
     args = ap.parse_args(argv)
     jax.config.update("jax_compilation_cache_dir", str(Path(args.data).parent / "vdsbi_jax_cache"))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 2.0)
