@@ -180,3 +180,22 @@ def test_resume_from_state_is_bit_identical(tmp_path, getkey):
     assert tree_allclose(post_res.flow, post_full.flow, rtol=0, atol=0)
     k = getkey()
     np.testing.assert_array_equal(np.asarray(post_res.sample(k, 100)), np.asarray(post_full.sample(k, 100)))
+
+
+def test_apt_rounds_compile_a_bounded_number_of_shapes(getkey):
+    # Growing data between rounds must not recompile the step: the scanned blocks have one
+    # length (padding steps are masked), and a second run with the same shapes reuses every
+    # trace (the regression test optax/blackjax keep for their steps).
+    prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
+    cfg = dataclasses.replace(TINY, max_epochs=2)
+    kw = dict(embedding=IdentityEmbedding(2), rounds=3, sims_per_round=[150, 170, 190], config=cfg)
+    names = ("train_steps", "eval_steps")
+    before = {k: TRACE_COUNTS[k] for k in names}
+    apt(getkey(), _gauss_sim, prior, jnp.zeros(2), **kw)
+    first = {k: TRACE_COUNTS[k] - before[k] for k in names}
+    # one trace per loss (ML in round 1, atomic after): blocks have one padded length
+    assert first["train_steps"] <= 2
+    assert first["eval_steps"] <= 3
+    before = {k: TRACE_COUNTS[k] for k in names}
+    apt(getkey(), _gauss_sim, prior, jnp.array([0.3, -0.2]), **kw)
+    assert all(TRACE_COUNTS[k] == before[k] for k in names)

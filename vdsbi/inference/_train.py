@@ -48,31 +48,45 @@ def train_step(flow: ConditionalFlow, opt_state, batch, key: PRNGKeyArray, loss:
 
 
 @eqx.filter_jit
-def train_steps(flow: ConditionalFlow, opt_state, batches, keys, loss: AbstractLoss, optimizer):
+def train_steps(flow: ConditionalFlow, opt_state, batches, keys, loss: AbstractLoss, optimizer, live=None):
     """Consecutive steps in one ``lax.scan``: ``batches`` leaves are ``(num_steps, batch, ...)``.
 
     Python dispatch of a small flow's step costs about as much as its arithmetic, so blocks of
-    steps run as one compiled loop; returns ``(flow, opt_state, mean loss)``.
+    steps run as one compiled loop. ``live`` (``(num_steps,)`` bool, default all True) marks
+    padding steps that leave the state untouched, so every block of an epoch has one length and
+    the loop is compiled once however the data grow. Returns ``(flow, opt_state, mean loss)``
+    (the mean over live steps).
     """
     TRACE_COUNTS["train_steps"] += 1
     params, static = eqx.partition(flow, trainable_filter(flow))
+    live = jnp.ones(keys.shape[0], bool) if live is None else live
+    dtype = jax.tree.leaves(params)[0].dtype
 
     def body(carry, inp):
-        params, opt_state = carry
-        batch, key = inp
-        params, opt_state, value = _update(params, static, opt_state, batch, key, loss, optimizer)
+        batch, key, on = inp
+
+        def step(c):
+            return _update(*c[:1], static, c[1], batch, key, loss, optimizer)
+
+        def skip(c):
+            return c[0], c[1], jnp.zeros((), dtype)
+
+        params, opt_state, value = jax.lax.cond(on, step, skip, carry)
         return (params, opt_state), value
 
-    (params, opt_state), values = jax.lax.scan(body, (params, opt_state), (batches, keys))
-    return eqx.combine(params, static), opt_state, jnp.mean(values)
+    (params, opt_state), values = jax.lax.scan(body, (params, opt_state), (batches, keys, live))
+    mean = jnp.sum(jnp.where(live, values, 0.0)) / jnp.maximum(jnp.sum(live), 1)
+    return eqx.combine(params, static), opt_state, mean
 
 
 @eqx.filter_jit
-def eval_steps(flow: ConditionalFlow, batches, key: PRNGKeyArray, loss: AbstractLoss):
-    """Mean loss over ``(num_batches, batch, ...)`` validation batches, in one compiled loop."""
+def eval_steps(flow: ConditionalFlow, batches, key: PRNGKeyArray, loss: AbstractLoss, live=None):
+    """Mean loss over ``(num_batches, batch, ...)`` validation batches (the ``live`` ones), in one
+    compiled loop."""
     TRACE_COUNTS["eval_steps"] += 1
     values = jax.lax.map(lambda b: loss(flow, *b, key), batches)
-    return jnp.mean(values)
+    live = jnp.ones(values.shape[0], bool) if live is None else live
+    return jnp.sum(jnp.where(live, values, 0.0)) / jnp.maximum(jnp.sum(live), 1)
 
 
 def init_opt_state(flow: ConditionalFlow, optimizer):
@@ -91,14 +105,15 @@ def _batch_size(requested: int, available: int, ndev: int) -> int:
     return _round_down(1 << (max(available, 1).bit_length() - 1), ndev)
 
 
-def _chunks(idx: np.ndarray, size: int) -> list[np.ndarray]:
-    """Rows of ``idx`` in blocks of ``size``, the remainder in powers of two: the compiled scan
-    sees at most ⌈log₂ size⌉ + 1 distinct lengths however the data grow between rounds."""
-    out, i, n = [], 0, len(idx)
-    while i < n:
-        m = size if n - i >= size else 1 << ((n - i).bit_length() - 1)
-        out.append(idx[i : i + m])
-        i += m
+def _blocks(idx: np.ndarray, size: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Rows of ``idx`` in blocks of exactly ``size`` rows, the last padded by repeating its first
+    row; with each block a ``live`` mask (False on padding). One length: one compiled loop."""
+    out = []
+    for i in range(0, len(idx), size):
+        block = idx[i : i + size]
+        live = np.arange(size) < len(block)
+        pad = np.repeat(block[:1], size - len(block), axis=0)
+        out.append((np.concatenate([block, pad]), live))
     return out
 
 
@@ -126,7 +141,9 @@ def fit(
 
     Batches have a fixed size (ragged last batch dropped), a multiple of the device count; the
     batch axis is sharded over ``mesh`` and the model is replicated. Steps run in compiled
-    blocks of ``steps_per_call`` (a ``lax.scan``), so per-step Python dispatch is amortised.
+    blocks of exactly ``steps_per_call`` (a ``lax.scan``; the last block of an epoch padded with
+    masked no-op steps), so per-step Python dispatch is amortised and the loop is compiled once
+    per loss and batch size, not once per data size.
     """
     mesh = data_mesh() if mesh is None else mesh
     ndev = mesh.devices.size
@@ -146,22 +163,24 @@ def fit(
     data = (theta, x, prior_mask)
     val_idx = va[: nvb * vsz].reshape(nvb, vsz)
     val_batches = [
-        stack_batches(tuple(a[idx] for a in data), mesh) for idx in _chunks(val_idx, steps_per_call)
+        (stack_batches(tuple(a[idx] for a in data), mesh), live, live.sum())
+        for idx, live in _blocks(val_idx, steps_per_call)
     ]
+    block = steps_per_call
     best, best_flow, best_epoch, since = np.inf, flow, -1, 0
     train_hist, val_hist = [], []
     for epoch in range(max_epochs):
         key, k_perm, k_steps = jax.random.split(key, 3)
         perm = tr[np.asarray(jax.random.permutation(k_perm, tr.size))][: nb * bsz].reshape(nb, bsz)
         step_keys = jax.random.split(k_steps, nb)
-        total, start = jnp.zeros(()), 0
-        for idx in _chunks(perm, steps_per_call):
+        total = jnp.zeros(())
+        for j, (idx, live) in enumerate(_blocks(perm, block)):
             batches = stack_batches(tuple(a[idx] for a in data), mesh)
-            keys = step_keys[start : start + len(idx)]
-            flow, opt_state, mean = train_steps(flow, opt_state, batches, keys, loss, optimizer)
-            total, start = total + mean * len(idx), start + len(idx)
+            keys = step_keys[np.minimum(np.arange(j * block, (j + 1) * block), nb - 1)]
+            flow, opt_state, mean = train_steps(flow, opt_state, batches, keys, loss, optimizer, live)
+            total = total + mean * live.sum()
         train_loss = float(total) / nb
-        val_loss = sum(float(eval_steps(flow, vb, val_key, loss)) * len(vb[0]) for vb in val_batches) / nvb
+        val_loss = sum(float(eval_steps(flow, vb, val_key, loss, lv)) * n for vb, lv, n in val_batches) / nvb
         train_hist.append(train_loss)
         val_hist.append(val_loss)
         if val_loss < best:
