@@ -16,6 +16,7 @@ import numpy as np
 
 from ..io import InputError, Recording
 from ..simulator import CHANNELS, GRAVITY, Decimator, Inputs, Vehicle
+from ._limit import slides
 from ._measured import measured_longitudinal, smoothed_yaw_rate
 from ._noise import raw_noise_std
 from ._windows import Window, choose_windows
@@ -51,6 +52,8 @@ class ProblemSettings:
         channels: channels to condition on (default: every measured channel the mode allows).
         quiet_edges: start windows at the quietest nearby moment (near straight running), where
             the steady-state initial lateral state is accurate.
+        limit_handling: "exclude" (default) cuts slides caught by counter-steer out of the
+            driving, with margins and a stated reason (`slides`); "keep" keeps them.
     """
 
     longitudinal: str = "auto"
@@ -64,8 +67,11 @@ class ProblemSettings:
     segment: tuple[float, float] | None = None
     channels: tuple[str, ...] | None = None
     quiet_edges: bool = True
+    limit_handling: str = "exclude"
 
     def __post_init__(self):
+        if self.limit_handling not in ("exclude", "keep"):
+            raise ValueError(f"limit_handling must be 'exclude' or 'keep', got {self.limit_handling!r}")
         if self.longitudinal not in (*LONGITUDINAL_MODES, "auto"):
             raise ValueError(f"longitudinal must be 'torque', 'speed' or 'auto', got {self.longitudinal!r}")
         if not 0.0 < self.held_out < 1.0:
@@ -371,6 +377,7 @@ def make_problem(rec: Recording, vehicle: Vehicle, settings: ProblemSettings = P
         min_windows_to_split=settings.min_windows_to_split,
         max_windows=settings.max_windows,
         quiet_edges=settings.quiet_edges,
+        exclude=_limit_stretches(rec, vehicle, settings),
     )
     idx, t, u, speed, accel, v0, r0, lengths = _window_arrays(rec, windows, mode, vehicle)
     decimator = _decimator(rec, mode, settings)
@@ -406,6 +413,12 @@ def make_problem(rec: Recording, vehicle: Vehicle, settings: ProblemSettings = P
         description=described,
         warnings=tuple(rec.warnings),
     )
+
+
+def _limit_stretches(rec: Recording, vehicle: Vehicle, settings: ProblemSettings):
+    if settings.limit_handling == "keep":
+        return []
+    return slides(rec, wheel_radius=vehicle.wheel_radius, friction=vehicle.friction)
 
 
 def _restrict(rec: Recording, segment: tuple[float, float]) -> Recording:

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 
 from ..io import Recording, find_segments
+from ._limit import subtract
 from ._measured import running_mean
 
 
@@ -96,6 +98,7 @@ def choose_windows(
     min_windows_to_split: int,
     max_windows: int | None,
     quiet_edges: bool = True,
+    exclude: Sequence[tuple[float, float, str]] = (),
 ) -> tuple[list[Window], dict]:
     """Windows over every usable stretch of `rec`, and why.
 
@@ -105,16 +108,19 @@ def choose_windows(
     the last `held_out` fraction of the usable driving time are held out whole (validation on
     driving the fit never saw); a shorter drive keeps its windows and holds out the last
     `held_out` fraction of each. With `max_windows`, the longest windows are kept (ties by time).
-    With no usable stretch the whole recording is one window.
+    Stretches in `exclude` ((t0, t1, reason): limit handling) are cut out of the usable driving
+    and reported as rejected. With no usable stretch the whole recording is one window.
 
     Returns:
         windows in time order, and a description {"usable", "rejected", "how"}.
     """
-    segs = find_segments(rec, wheel_radius=wheel_radius, min_duration=min(min_duration, 0.9 * rec.duration))
-    usable = [(s.t0, s.t1) for s in segs if s.usable]
+    shortest = min(min_duration, 0.9 * rec.duration)
+    segs = find_segments(rec, wheel_radius=wheel_radius, min_duration=shortest)
+    usable = subtract([(s.t0, s.t1) for s in segs if s.usable], list(exclude), shortest)
+    rejected = [(s.t0, s.t1, s.reason) for s in segs if not s.usable] + list(exclude)
     described = {
         "usable": [[round(a, 3), round(b, 3)] for a, b in usable],
-        "rejected": [[round(s.t0, 3), round(s.t1, 3), s.reason] for s in segs if not s.usable],
+        "rejected": [[round(a, 3), round(b, 3), why] for a, b, why in sorted(rejected)],
     }
     if not usable:
         usable = [(float(rec.t[0]), float(rec.t[-1]))]

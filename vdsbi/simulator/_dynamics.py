@@ -101,6 +101,14 @@ class VehicleModel(eqx.Module):
             front, rear = front * f, rear * r
         return self.vehicle.friction * front, self.vehicle.friction * rear
 
+    def yaw_inertia(self, theta, effect_params) -> Float[Array, ""]:
+        """I_z = m·l_f·l_r (the seed's approximation) times the effects' factors."""
+        scale = jnp.asarray(1.0)
+        for e, p in zip(self.effects, effect_params):
+            scale = scale * e.yaw_inertia_scale(p)
+        l_f = theta[0]
+        return self.vehicle.mass * l_f * (self.vehicle.wheelbase - l_f) * scale
+
     def radius(self, effect_params) -> Float[Array, ""]:
         scale = jnp.asarray(1.0)
         for e, p in zip(self.effects, effect_params):
@@ -195,7 +203,7 @@ class VehicleModel(eqx.Module):
         delta, torque_f, torque_r = u[0], u[1], u[2]
         l_f, h, ckf, ckr, caf, car = (theta[i] for i in range(6))
         l_r = L - l_f
-        i_z = m * l_f * l_r
+        i_z = self.yaw_inertia(theta, effect_params)
         r_free = self.radius(effect_params)
         fz_f0, fz_r0 = self.static_loads(theta)
         zero = jnp.zeros_like(vx)
@@ -318,7 +326,7 @@ class VehicleModel(eqx.Module):
         delta = u[0]
         l_f, _, _, _, caf, car = (theta[i] for i in range(6))
         l_r = L - l_f
-        i_z = m * l_f * l_r
+        i_z = self.yaw_inertia(theta, effect_params)
         r_free = self.radius(effect_params)
         # Eq. 11 with the measured specific force: no fixed point to solve.
         fz_f, fz_r = self.loads(theta, a_x)

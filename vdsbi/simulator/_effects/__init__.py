@@ -21,6 +21,7 @@ from ._torque_gain import TorqueGain as TorqueGain
 from ._torque_lag import TorqueLag as TorqueLag
 from ._tyre_friction import TyreFriction as TyreFriction
 from ._wheel_radius_error import WheelRadiusError as WheelRadiusError
+from ._yaw_inertia import YawInertia as YawInertia
 
 #: Registry: name -> effect class, in search order. Filled by `register_effect` below; read
 #: at call time by everything that lists effects (simulation, identification, discovery).
@@ -80,5 +81,6 @@ for _cls in (
     TorqueGain,
     SignalDelay,
     SensorScale,
+    YawInertia,
 ):
     register_effect(_cls)

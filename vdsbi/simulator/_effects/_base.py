@@ -69,6 +69,10 @@ class AbstractEffect(eqx.Module):
         """Factors on the friction coefficient μ of the front and rear tyres."""
         return jnp.asarray(1.0), jnp.asarray(1.0)
 
+    def yaw_inertia_scale(self, p) -> Float[Array, ""]:
+        """Factor on the yaw inertia I_z = m·l_f·l_r."""
+        return jnp.asarray(1.0)
+
     def radius_scale(self, p) -> Float[Array, ""]:
         """Factor on the free tire radius."""
         return jnp.asarray(1.0)
