@@ -42,3 +42,4 @@ from ._misspecification import (
     locate_mismatch as locate_mismatch,
     misspecification_test as misspecification_test,
 )
+from ._refine import Refinement as Refinement, refine as refine
