@@ -226,10 +226,17 @@ class Fitter:
         dt: RK4 step, s (5 ms for the search, the simulator's default 2.5 ms for the test
             and the final fit).
         effects: the candidate effects (default: every registered effect, read now).
+        free_effects: most effect parameters one fit may free (default: the three largest
+            effects', as the forward search adds up to three; all of them for a term refit).
     """
 
     def __init__(
-        self, vehicle: Vehicle, data: FitData, dt: float = 0.0025, effects: EffectSpace | None = None
+        self,
+        vehicle: Vehicle,
+        data: FitData,
+        dt: float = 0.0025,
+        effects: EffectSpace | None = None,
+        free_effects: int | None = None,
     ):
         self.vehicle = vehicle
         self.effects = effect_space() if effects is None else effects
@@ -240,7 +247,8 @@ class Fitter:
         self.solver = Solver(dt=self.dt)
         w = data.num_windows
         self.num_params = 6 + w + self.effects.num_params
-        self.width = 6 + w + self.effects.max_pair_params
+        most = self.effects.max_pair_params if free_effects is None else int(free_effects)
+        self.width = 6 + w + most
         self.num_residuals = int(np.asarray(data.mask).sum()) * len(data.channels)
         e = self.effects
         self._z_eff_start = logit((e.start - e.lo) / (e.hi - e.lo))

@@ -171,7 +171,8 @@ def discover_terms(
     if not picked:
         return TermDiscovery([], None, None, effects, screened, None)
     sel = tuple(k for k, _ in picked)
-    fitter = Fitter(vehicle, data, dt=dt, effects=effect_space(chosen, extra=(term_effect(sel),)))
+    space = effect_space(chosen, extra=(term_effect(sel),))
+    fitter = Fitter(vehicle, data, dt=dt, effects=space, free_effects=space.num_params)
     fit = fitter.fit(effects, _transfer(library_fit.z, library_fitter, fitter, chosen), max_iter=max_iter)
     gain = float(bic_score(fit, library_fit))
     if gain < STRONG:
