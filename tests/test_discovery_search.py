@@ -60,3 +60,18 @@ def test_look_alikes_are_reported_as_ambiguous():
     found = forward_search(fit_fn, base, ("a", "b"), max_effects=3)
     assert found.selected == ("a",)
     assert found.steps[0].ambiguous_with == ["b"]
+
+
+def test_an_effect_that_entered_as_a_stand_in_leaves_once_the_true_ones_are_in():
+    # g mimics most of a + b alone (best single), but beside both it adds nothing
+    explained = {"a": _chi2_for(300), "b": _chi2_for(250), "g": _chi2_for(400)}
+    overlap = {
+        frozenset({"g", "a"}): -_chi2_for(250),
+        frozenset({"g", "b"}): -_chi2_for(200),
+        frozenset({"g", "a", "b"}): _chi2_for(250) + _chi2_for(200) - _chi2_for(400) - 2 * PENALTY,
+    }
+    fit_fn, base = _fake_fits(explained, overlap)
+    found = forward_search(fit_fn, base, ("a", "b", "g"), max_effects=3)
+    assert found.steps[0].added == "g"
+    assert found.selected == ("a", "b"), found.steps
+    assert any(s.removed == "g" for s in found.steps)

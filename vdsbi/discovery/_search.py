@@ -9,6 +9,11 @@ up to `max_effects` effects. The gain is the BIC log Bayes factor of the larger 
 current one, so a strong effect no longer hides a weak one (pairs among the top singles did:
 the weak effect may rank low alone while the strong one's misfit dominates).
 
+After each addition, each earlier member is tried out again (a backward step): one that no
+longer adds strong evidence beside the others is removed — an effect that entered first as a
+look-alike of two true ones (e.g. a torque gain standing in for a wheel-radius error) leaves
+once they are in.
+
 Ambiguity is reported, not hidden: at each step the other effects whose gain is strong and
 within `STRONG` of the best one's are listed as look-alikes the data cannot separate there.
 """
@@ -25,12 +30,14 @@ from ._rank import STRONG, bic_score
 
 class Step(NamedTuple):
     """One forward step: the set it started from, the effect it added (None: stopped), the
-    evidence gain of every effect tried, and the strong rivals of the added one."""
+    evidence gain of every effect tried, the strong rivals of the added one, and an earlier
+    member removed by the backward step (None: none)."""
 
     current: tuple[str, ...]
     added: str | None
     gains: dict[str, float]
     ambiguous_with: list[str]
+    removed: str | None = None
 
 
 class ForwardSearch(NamedTuple):
@@ -82,13 +89,32 @@ def forward_search(
     fits: dict[tuple[str, ...], FitResult] = {(): base}
     steps: list[Step] = []
     current: tuple[str, ...] = ()
-    while len(current) < max(1, max_effects):
+    # bounded: each step adds one effect and removes at most one
+    for _ in range(2 * max(1, max_effects) + 2):
+        if len(current) >= max(1, max_effects):
+            break
         step = _step(current, tuple(names), fits, fit_fn)
-        steps.append(step)
         if step.added is None:
+            steps.append(step)
             break
         current = _ordered(current + (step.added,), names)
+        current, removed = _prune(current, step.added, fits, fit_fn)
+        steps.append(step._replace(removed=removed))
     return ForwardSearch(fits, steps, current)
+
+
+def _prune(current, added, fits, fit_fn):
+    """The backward step: drop the first earlier member whose removal costs < `STRONG`."""
+    for e in current:
+        if e == added:
+            continue
+        sub = tuple(x for x in current if x != e)
+        refit = fit_fn(sub, fits[current].z)  # warm-started from the larger set
+        if sub not in fits or refit.chi2 < fits[sub].chi2:
+            fits[sub] = refit
+        if bic_score(fits[current], fits[sub]) < STRONG:
+            return sub, e
+    return current, None
 
 
 def describe(steps: Sequence[Step]) -> list[dict]:
@@ -103,6 +129,7 @@ def describe(steps: Sequence[Step]) -> list[dict]:
                 "gain": s.gains.get(s.added) if s.added else None,
                 "best_gains": {e: g for e, g in top},
                 "ambiguous_with": s.ambiguous_with,
+                "removed": s.removed,
             }
         )
     return out
