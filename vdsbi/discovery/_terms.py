@@ -46,6 +46,7 @@ class TermDiscovery:
         effects: the effect names of the refit (the chosen ones and `TERM_EFFECT`).
         screened: linearised evidence gain of every candidate term at the first step.
         gain: log Bayes factor of the refit against the library fit (None: no refit).
+        dropped: library effects removed beside the terms (they were standing in for them).
     """
 
     terms: list[dict]
@@ -54,6 +55,7 @@ class TermDiscovery:
     effects: tuple[str, ...]
     screened: dict[str, float]
     gain: float | None
+    dropped: list[str] = dataclasses.field(default_factory=list)
 
 
 @eqx.filter_jit
@@ -177,6 +179,9 @@ def discover_terms(
     gain = float(bic_score(fit, library_fit))
     if gain < STRONG:
         return TermDiscovery([], None, None, effects, screened, gain)
+    fit, dropped = _drop_stand_ins(fitter, fit, chosen, max_iter)
+    effects = fit.effects
+    gain = float(bic_score(fit, library_fit))
     rms = _rms_change(fitter, fit, effects, sel)
     terms = []
     for key, lin_gain in picked:
@@ -193,7 +198,20 @@ def discover_terms(
                 "rms_change": rms[key],
             }
         )
-    return TermDiscovery(terms, fit, fitter, effects, screened, gain)
+    return TermDiscovery(terms, fit, fitter, effects, screened, gain, dropped)
+
+
+def _drop_stand_ins(fitter: Fitter, fit: FitResult, chosen, max_iter: int):
+    """Backward step beside the terms: a library effect that adds no strong evidence once the
+    terms are in was standing in for them; it is dropped (same compiled kernel: inactive
+    effects sit at their null values)."""
+    dropped = []
+    for e in chosen:
+        trial = fitter.fit(tuple(x for x in fit.effects if x != e), fit.z, max_iter=max_iter)
+        if bic_score(fit, trial) < STRONG:
+            fit = trial
+            dropped.append(e)
+    return fit, dropped
 
 
 def terms_section(found, held_terms: dict | None, chi_after: float, alpha: float) -> dict:
@@ -213,6 +231,9 @@ def terms_section(found, held_terms: dict | None, chi_after: float, alpha: float
         chi_t = float(np.mean([v["chi2_dof"] for v in out["fit"].values()]))
         better = chi_t < chi_after
         formulas = "; ".join(t["formula"] for t in td.terms)
+        if td.dropped:
+            formulas += f" (which makes {', '.join(td.dropped)} unnecessary)"
+        out["terms_replace"] = list(td.dropped)
         whole = out["p_value_after_terms"] >= alpha / 10 and better
         out["explanation"] = "discovered term" if better else "unexplained"
         out["sentence"] = (
