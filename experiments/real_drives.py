@@ -20,6 +20,7 @@ experiments/results/real_drives{_quick}/<drive>_<mode>/ (identify's files, overl
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -130,7 +131,7 @@ def overlay(path, problem, preds: dict[str, np.ndarray]) -> None:
     held = [w for w, win in enumerate(problem.windows) if win.role == "held"]
     chans = [c for c in CHANNELS if c in problem.channels]
     fig, axes = plt.subplots(len(chans), 1, figsize=(11, 2.6 * len(chans)), sharex=True, squeeze=False)
-    colours = {"ours": "C0", "lab values": "C2", "linear LS baseline": "C3"}
+    colours = {"ours (refined)": "C0", "ours (posterior mean)": "C1", "lab values": "C2", "linear LS baseline": "C3"}
     for k, c in enumerate(chans):
         ax, i = axes[k, 0], problem.channels.index(c)
         for j, w in enumerate(held):
@@ -175,41 +176,51 @@ def run_one(name: str, mode: str, args, out: Path) -> dict:
     )
     wall = time.perf_counter() - t0
     s = res.summary
-    # The comparison grid: identify's own problem (same windows, same 5 Hz filter).
     window = 10.0 if mode == "speed" else 20.0
-    problem = make_problem(rec, veh, ProblemSettings(longitudinal=mode, max_window=window, bandwidth=5.0))
     names = list(s["parameters"])
     mean = np.array([s["parameters"][n]["mean"] for n in names])
-    effects = s["effects"]
-    eff_values = _effect_values(names, mean)
-    ours, _ = predict(problem, mean[:6], effects, eff_values)
-    ref = np.array([LAB.get(n, m) for n, m in zip(names[:6], mean[:6])])
-    lab, _ = predict(problem, ref, effects, eff_values)
-    speed_problem = problem
-    if mode == "torque":
-        # The same windows (same recording, same segments), followed by the measured speed.
-        settings = ProblemSettings(longitudinal="speed", max_window=window, bandwidth=5.0)
-        speed_problem = make_problem(rec, veh, settings)
-    base_fit, base_pred = baseline(speed_problem, rec, veh)
-    preds = {
-        "ours": by_channel(problem, ours),
-        "lab values": by_channel(problem, lab),
-        "linear LS baseline": by_channel(speed_problem, base_pred),
-    }
-    overlay(out / "overlay.png", problem, preds)
+    refined = np.array([s["refined"]["values"][n] for n in names]) if "refined" in s else mean
+    ref = np.array([LAB.get(n, m) for n, m in zip(names, refined)])
+    estimates = {"ours (posterior mean)": mean, "ours (refined)": refined, "lab values": ref}
+    scored, overlays = {}, {}
+    # The comparison grid: identify's own problem (same windows, same 5 Hz filter), and the same
+    # with the detected slide kept in (every held-out second scored).
+    for limit in ("exclude", "keep"):
+        settings = ProblemSettings(longitudinal=mode, max_window=window, bandwidth=5.0, limit_handling=limit)
+        problem = make_problem(rec, veh, settings)
+        preds = {k: by_channel(problem, _predict(problem, v, names, s["effects"])) for k, v in estimates.items()}
+        speed_problem = problem
+        if mode == "torque":
+            # The same windows (same recording, same segments), followed by the measured speed.
+            speed_problem = make_problem(rec, veh, dataclasses.replace(settings, longitudinal="speed"))
+        base_fit, base_pred = baseline(speed_problem, rec, veh)
+        preds["linear LS baseline"] = by_channel(speed_problem, base_pred)
+        scored[limit] = {k: nrmse(problem, v) for k, v in preds.items()}
+        overlays[limit] = (problem, preds)
+    problem, preds = overlays["exclude"]
+    overlay(out / "overlay.png", problem, {k: v for k, v in preds.items() if k != "ours (posterior mean)"})
     return {
         "drive": name,
         "mode": mode,
         "wall_s": wall,
         "parameters": s["parameters"],
+        "refined": s.get("refined"),
         "not_identified": s["not_identified"],
-        "effects": effects,
+        "effects": s["effects"],
         "windows": s["problem"]["windows"],
-        "held_out_nrmse": {k: nrmse(problem, v) for k, v in preds.items()},
+        "rejected": problem.description["rejected"],
+        "held_out_nrmse": scored["exclude"],
+        "held_out_nrmse_slides_kept": scored["keep"],
         "baseline_fit": base_fit,
         "validation": s["validation"],
         "ppc": s["ppc"],
+        "warnings": s.get("warnings", []),
     }
+
+
+def _predict(problem, values, names, effects):
+    pred, _ = predict(problem, values[:6], effects, _effect_values(names, values))
+    return pred
 
 
 def _effect_values(names, values) -> dict:
@@ -244,18 +255,30 @@ def markdown(rows: list[dict], diag: dict) -> str:
         out.append(
             f"effects in θ: {', '.join(r['effects']) or 'none'}; not identified: {', '.join(r['not_identified']) or 'none'}"
         )
-        out += ["", "| param | ours mean | 95 % interval | lab |", "|---|---|---|---|"]
+        excluded = [x for x in r.get("rejected", []) if str(x[2]).startswith("limit handling")]
+        for a, b, why in excluded:
+            out.append(f"\nexcluded {a:.1f}–{b:.1f} s: {why}")
+        refined = (r.get("refined") or {}).get("values", {})
+        out += ["", "| param | ours mean | 95 % interval | ours refined | lab |", "|---|---|---|---|---|"]
         for n, p in r["parameters"].items():
             lab = LAB.get(n, "")
             if p.get("identified") is False:
                 out.append(
-                    f"| {n} | not identified | (prior {p['prior'][0]:.4g}–{p['prior'][1]:.4g}) | {lab} |"
+                    f"| {n} | not identified | (prior {p['prior'][0]:.4g}–{p['prior'][1]:.4g}) | | {lab} |"
                 )
             else:
-                out.append(f"| {n} | {p['mean']:.4g} | {p['q025']:.4g}–{p['q975']:.4g} | {lab} |")
-        out += ["", "| held-out NRMSE | yaw rate | a_y (5 Hz) |", "|---|---|---|"]
+                ref = f"{refined[n]:.4g}" if n in refined else ""
+                out.append(f"| {n} | {p['mean']:.4g} | {p['q025']:.4g}–{p['q975']:.4g} | {ref} | {lab} |")
+        out += [
+            "",
+            "| held-out NRMSE | yaw rate | a_y (5 Hz) | yaw rate, slide kept | a_y, slide kept |",
+            "|---|---|---|---|---|",
+        ]
+        kept = r.get("held_out_nrmse_slides_kept", {})
         for k, v in r["held_out_nrmse"].items():
-            out.append(f"| {k} | {v.get('yaw_rate', float('nan')):.3f} | {v.get('ay', float('nan')):.3f} |")
+            w = kept.get(k, {})
+            cells = [v.get("yaw_rate"), v.get("ay"), w.get("yaw_rate"), w.get("ay")]
+            out.append(f"| {k} | " + " | ".join("" if c is None else f"{c:.3f}" for c in cells) + " |")
         out += [""]
     for name, d in diag.items():
         out += [

@@ -52,19 +52,27 @@ class IdentifyResult:
         samples: (num_samples, 6) posterior draws, PARAM_NAMES order.
         summary: the content of posterior.json (parameters, channels, segment, noise, settings).
         out_dir: where the files were written, or None.
+        problem: the drive's `vdsbi.problem.Problem` (windows, channels, held-out masks).
+        ppc: the posterior-predictive 5/50/95 % bands on `problem`'s windows.
     """
 
     posterior: Any
     samples: np.ndarray
     summary: dict[str, Any]
     out_dir: Path | None = None
+    problem: Any = None
+    ppc: dict[str, Any] | None = None
 
     def table(self) -> str:
         """Per-parameter mean, std and 5/50/95 % quantiles as aligned text; a parameter the drive
         cannot inform is printed as "not identified" with its prior range, never as an estimate;
         then one line per warning (posterior not to be trusted)."""
         width = max(10, *(len(n) for n in self.summary["parameters"]))
-        rows = [f"{'param':<{width}} {'mean':>11} {'std':>10} {'q05':>11} {'q50':>11} {'q95':>11}"]
+        refined = self.summary.get("refined", {}).get("values", {})
+        rows = [
+            f"{'param':<{width}} {'mean':>11} {'std':>10} {'q05':>11} {'q50':>11} {'q95':>11}"
+            + (f" {'refined':>11}" if refined else "")
+        ]
         for name, p in self.summary["parameters"].items():
             if p.get("identified") is False:
                 lo, hi = p["prior"]
@@ -73,6 +81,7 @@ class IdentifyResult:
             rows.append(
                 f"{name:<{width}} {p['mean']:>11.4g} {p['std']:>10.3g} "
                 f"{p['q05']:>11.4g} {p['q50']:>11.4g} {p['q95']:>11.4g}"
+                + (f" {refined[name]:>11.4g}" if name in refined else "")
             )
         rows += [f"WARNING: {w['message']}" for w in self.summary.get("warnings", ())]
         return "\n".join(rows)
@@ -99,6 +108,7 @@ def identify(
     bandwidth: float | str | None = "auto",
     effects: Sequence[str] | None = None,
     compare: Mapping[str, Any] | None = None,
+    refine: bool = True,
     ppc_draws: int = 100,
     progress: bool = False,
     rate: float = 200.0,
@@ -110,7 +120,8 @@ def identify(
 
     Stages: read the drive; make its problem (windows over every usable stretch, the last 30 %
     held out); choose the effects; train APT on the training windows; summarise; flag the
-    parameters the drive cannot inform (Fisher information); validate on the held-out driving;
+    parameters the drive cannot inform (Fisher information); refine the point estimate by least
+    squares; validate both on the held-out driving;
     posterior predictive check; write the files.
 
     Args:
@@ -131,9 +142,12 @@ def identify(
         bandwidth: low-pass cutoff, Hz, shared by measured and simulated channels ("auto": none
             with torques, 5 Hz following the speed; None: none).
         effects: effects whose parameters join θ; None adds `tyre_friction` when the drive
-            uses more than half the grip (Dugoff leaves its linear range there), else none.
+            uses more than half the grip (Dugoff leaves its linear range there) and
+            `yaw_inertia` in speed mode with a measured yaw rate.
         compare: reference values {param: value} (e.g. a lab's) scored on the held-out part
             beside the posterior mean.
+        refine: refine the posterior mean by least squares on the whole training drive
+            (`vdsbi.diagnostics.refine`): the `refined` point estimate, validated beside it.
         ppc_draws: posterior draws simulated for the predictive check.
         progress: tqdm bars.
         on_round_end: extra hook called with the APT state after each round's checkpoint.
@@ -163,13 +177,16 @@ def identify(
             k_id, prob, box, effects, settings, state, out, progress, on_round_end, say
         )
         summary = _summary(prob, samples, state, run_info, box, effects)
+        summary["vehicle"] = veh.to_dict()  # the constants `vdsbi export` needs beside θ
+        if refine:
+            summary["refined"] = _refined(prob, summary, samples, box, effects, say)
         summary["validation"] = _validation(prob, summary, effects, compare)
         ppc = posterior_predictive(k_ppc, prob, samples, effects, ppc_draws)
         summary["ppc"] = _ppc_summary(prob, ppc)
         summary["warnings"] = _warnings(
             samples, summary, box, names or (recording, vehicle, out_dir), longitudinal
         )
-        result = IdentifyResult(posterior, samples, summary, out)
+        result = IdentifyResult(posterior, samples, summary, out, prob, ppc)
         if out is not None:
             write_outputs(out, result, prob, ppc)
     return result
@@ -214,7 +231,8 @@ def _problem(rec, veh, longitudinal: str, segment, max_duration: float | None, b
 
 
 def _effects(prob: Problem, effects, say) -> tuple[str, ...]:
-    """The user's effects, or `tyre_friction` where the drive reaches past Dugoff's linear range."""
+    """The user's effects; by default `tyre_friction` where the drive reaches past Dugoff's
+    linear range, and `yaw_inertia` in speed mode with a measured yaw rate (a real drive)."""
     from ..simulator import EFFECTS
 
     if effects is not None:
@@ -224,11 +242,17 @@ def _effects(prob: Problem, effects, say) -> tuple[str, ...]:
                 "settings", "--effects", f"unknown effect {unknown[0]!r}; known: {', '.join(EFFECTS)}"
             )
         return tuple(effects)
+    chosen = []
     used = grip_used(prob)
     if used is not None and used > 0.5:
         say(f"the drive uses {used:.0%} of the grip μ·g: friction joins θ (tyre_friction.scale)")
-        return ("tyre_friction",)
-    return ()
+        chosen.append("tyre_friction")
+    if prob.longitudinal == "speed" and "yaw_rate" in prob.channels:
+        # A real car's I_z is not m·l_f·l_r; left at it, the fit bends l_f to match the yaw
+        # transient (on vw_gti_high_speed_2: l_f 0.90 m without, 1.38 m with; lab 1.264 m).
+        say("following the measured yaw rate: the yaw inertia joins θ (yaw_inertia.dynamic_index)")
+        chosen.append("yaw_inertia")
+    return tuple(chosen)
 
 
 def _run_info(rec, prob: Problem, settings, seed: int, effects) -> dict[str, Any]:
@@ -371,6 +395,9 @@ def _validation(prob: Problem, summary: dict, effects, compare) -> dict[str, Any
     names = parameter_names(effects)
     mean = np.array([summary["parameters"][n]["mean"] for n in names])
     out = {"posterior_mean": _score(prob, mean, effects)}
+    if "refined" in summary:
+        refined = np.array([summary["refined"]["values"][n] for n in names])
+        out["refined"] = _score(prob, refined, effects)
     if compare:
         unknown = [k for k in compare if k not in names]
         if unknown:
@@ -380,6 +407,33 @@ def _validation(prob: Problem, summary: dict, effects, compare) -> dict[str, Any
         ref = np.array([float(compare.get(n, m)) for n, m in zip(names, mean)])
         out["reference"] = _score(prob, ref, effects) | {"given": {k: float(v) for k, v in compare.items()}}
     return out
+
+
+#: Posterior draws tried, beside the mean, as the refinement's start.
+REFINE_STARTS = 31
+
+
+def _refined(prob: Problem, summary: dict, samples: np.ndarray, box, effects, say) -> dict[str, Any]:
+    """The posterior mean refined by least squares over the training windows; parameters the
+    drive does not inform stay at their posterior mean (= the prior's)."""
+    from ..diagnostics import refine
+
+    names = parameter_names(effects)
+    mean = np.array([summary["parameters"][n]["mean"] for n in names])
+    free = [n for n in names if n not in summary["not_identified"]]
+    say(f"refining the point estimate by least squares over the training windows ({', '.join(free)})")
+    # Candidates: the mean and posterior draws (fixed parameters at the mean); the best start.
+    starts = np.concatenate([mean[None], samples[:REFINE_STARTS]])
+    fixed = [i for i, n in enumerate(names) if n not in free]
+    starts[:, fixed] = mean[fixed]
+    ref = refine(prob, starts, box, effects=effects, free=free)
+    return {
+        "method": "least squares from the posterior mean, channel scales profiled (diagnostics.refine)",
+        "values": {n: float(v) for n, v in zip(names, ref.theta)},
+        "free": list(ref.free),
+        "residual_rms": ref.scale,
+        "converged": ref.converged,
+    }
 
 
 def _score(prob: Problem, values: np.ndarray, effects) -> dict[str, Any]:

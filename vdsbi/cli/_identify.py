@@ -49,13 +49,18 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         default=None,
         metavar="NAME[,NAME...]",
         help="effects whose parameters join θ (default: tyre_friction when the drive uses more "
-        "than half the grip; 'none' for none)",
+        "than half the grip, and yaw_inertia when following the speed with a yaw rate; 'none' for none)",
     )
     p.add_argument(
         "--compare",
         default=None,
         metavar="VALUES.json",
         help="reference values {param: value} (e.g. a lab's) scored on the held-out driving too",
+    )
+    p.add_argument(
+        "--no-refine",
+        action="store_true",
+        help="skip the least-squares refinement of the point estimate (posterior.json `refined`)",
     )
     p.add_argument("--rate", type=float, default=200.0, help="model rate, Hz (default 200)")
     return p
@@ -80,6 +85,7 @@ def run(args) -> int:
         bandwidth="auto" if args.bandwidth is None else args.bandwidth,
         effects=_effects(args.effects),
         compare=_compare(args.compare),
+        refine=not args.no_refine,
         rate=args.rate,
         progress=not quiet and sys.stderr.isatty(),
         log=None if quiet else (lambda s: print(s, flush=True)),

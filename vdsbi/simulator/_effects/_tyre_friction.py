@@ -14,7 +14,7 @@ class TyreFriction(AbstractEffect):
     param_names = ("scale_front", "scale_rear")
     units = ("-", "-")
     null = (1.0, 1.0)
-    typical = ((0.8, 1.3), (0.8, 1.3))
+    typical = ((0.7, 1.5), (0.7, 1.5))
     bounds = ((0.4, 1.8), (0.4, 1.8))
     start = (1.0, 1.0)
     description = "road friction differs from vehicle.json's (saturation at the limit of adhesion)"
