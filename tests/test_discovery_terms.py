@@ -81,3 +81,38 @@ def test_selection_picks_the_column_that_made_the_residual():
 def test_formula_reads_as_an_equation():
     assert term_formula("ay_scale", 0.05) == "ay measured as ay + 0.05·ay (c in -)"
     assert term_formula("side_constant", -0.2).startswith("lateral force += -0.2·m ")
+
+
+def _found(p_before, p_after, effects=("torque_gain",), terms=None, p_terms=None):
+    from types import SimpleNamespace as NS
+
+    td = None
+    if terms is not None:
+        fit = NS() if terms else None
+        td = NS(terms=terms, fit=fit, dropped=[], screened={}, gain=10.0 if terms else None)
+    return NS(
+        test_before=NS(p_value=p_before),
+        test_after=NS(p_value=p_after),
+        test_terms=NS(p_value=p_terms),
+        final=NS(effects=effects),
+        terms=td,
+    )
+
+
+def test_explanation_says_what_explained_the_mismatch():
+    from vdsbi.discovery import terms_section
+
+    held = {"ay": {"chi2_dof": 1.3}, "yaw_rate": {"chi2_dof": 1.2}}
+    better = {"ay": {"chi2_dof": 1.0}, "yaw_rate": {"chi2_dof": 1.0}}
+    same = {"ay": {"chi2_dof": 1.299}, "yaw_rate": {"chi2_dof": 1.2}}
+    term = [{"formula": "ay measured as ay + 0.05·ay (c in -)"}]
+    assert terms_section(_found(0.3, 0.3, ()), held, None, 100, 0.05)["explanation"] == "none"
+    assert terms_section(_found(0.001, 0.2), held, None, 100, 0.05)["explanation"] == "library"
+    out = terms_section(_found(0.001, 0.001, terms=term, p_terms=0.3), held, better, 100, 0.05)
+    assert out["explanation"] == "discovered term" and out["held_out_gain"] == pytest.approx(25.0)
+    assert "ay + 0.05·ay" in out["sentence"]
+    # a term that does not predict the held-out part better is not claimed
+    out = terms_section(_found(0.001, 0.001, terms=term, p_terms=0.3), held, same, 100, 0.05)
+    assert out["explanation"] == "unexplained" and "does not predict" in out["sentence"]
+    out = terms_section(_found(0.001, 0.001, (), terms=[]), held, None, 100, 0.05)
+    assert out["explanation"] == "unexplained" and "left unexplained" in out["sentence"]

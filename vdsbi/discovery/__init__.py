@@ -34,4 +34,5 @@ from ._terms import (
     TermDiscovery as TermDiscovery,
     discover_terms as discover_terms,
     select_terms as select_terms,
+    terms_section as terms_section,
 )

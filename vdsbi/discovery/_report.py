@@ -101,7 +101,7 @@ def build_report(
     held_terms = None
     if "after_terms" in found.predictions:
         held_terms = _held_metrics(found.predictions["after_terms"], windows)
-    terms = terms_section(found, held_terms, chi_a, s.alpha)
+    terms = terms_section(found, fit_after, held_terms, int(windows.held.sum()), s.alpha)
     fits = {"before": fit_before, "after": fit_after}
     if "fit" in terms:
         fits["after_terms"] = terms.pop("fit")

@@ -214,42 +214,48 @@ def _drop_stand_ins(fitter: Fitter, fit: FitResult, chosen, max_iter: int):
     return fit, dropped
 
 
-def terms_section(found, held_terms: dict | None, chi_after: float, alpha: float) -> dict:
+def terms_section(found, held_after: dict, held_terms: dict | None, n_held: int, alpha: float) -> dict:
     """The discovered terms, their held-out fit and test, and what explained the mismatch:
-    "library" (effects claimed), "discovered term", "unexplained" or "none" (no mismatch).
-    `found` is the `DiagnosisResult`; `held_terms` the held-out metrics with the terms."""
+    "discovered term" (kept terms that also predict the held-out part better: held-out
+    log-likelihood gain ½·Σ(χ²_library − χ²_terms) ≥ `STRONG`), "library" (the chosen effects
+    leave p ≥ α/10), "unexplained", or "none" (no mismatch).
+
+    `found` is the `DiagnosisResult`; `held_after`, `held_terms` the held-out metrics per
+    channel after the library fix and with the terms; `n_held` held-out samples per channel."""
     detected = bool(found.test_before.p_value < alpha)
-    claimed = bool(found.test_after.p_value >= alpha) and detected and bool(found.final.effects)
-    out: dict = {"discovered_terms": [], "p_value_after_terms": None}
+    library = detected and bool(found.final.effects) and bool(found.test_after.p_value >= alpha / 10)
+    out: dict = {"discovered_terms": [], "p_value_after_terms": None, "terms_replace": []}
     td = found.terms
-    if td is not None:
-        out["term_search"] = {"screened_gain": td.screened, "refit_gain": td.gain}
-    if td is not None and td.fit is not None:
-        out["discovered_terms"] = td.terms
-        out["p_value_after_terms"] = float(found.test_terms.p_value)
-        out["fit"] = held_terms
-        chi_t = float(np.mean([v["chi2_dof"] for v in out["fit"].values()]))
-        better = chi_t < chi_after
-        formulas = "; ".join(t["formula"] for t in td.terms)
-        if td.dropped:
-            formulas += f" (which makes {', '.join(td.dropped)} unnecessary)"
-        out["terms_replace"] = list(td.dropped)
-        whole = out["p_value_after_terms"] >= alpha / 10 and better
-        out["explanation"] = "discovered term" if better else "unexplained"
-        out["sentence"] = (
-            f"outside the library the remaining mismatch is described by {formulas} (held-out mean "
-            f"χ²/dof {chi_after:.3g} → {chi_t:.3g}, p after = {out['p_value_after_terms']:.3g}"
-            + ("" if whole else "; something still remains")
-            + ")"
-            if better
-            else f"a term fitted the training part ({formulas}) but not the held-out part: left unexplained"
-        )
-    elif not detected:
-        out["explanation"] = "none"
-    elif claimed:
-        out["explanation"] = "library"
-    else:
-        out["explanation"] = "unexplained"
-        if td is not None:
+    if not detected:
+        return {**out, "explanation": "none"}
+    out["explanation"] = "library" if library else "unexplained"
+    if td is None:
+        return out
+    out["term_search"] = {"screened_gain": td.screened, "refit_gain": td.gain}
+    if td.fit is None:
+        if not library:
             out["sentence"] = "no candidate term has strong evidence either: left unexplained"
+        return out
+    out["discovered_terms"], out["terms_replace"] = td.terms, list(td.dropped)
+    out["p_value_after_terms"] = float(found.test_terms.p_value)
+    out["fit"] = held_terms
+    gain = 0.5 * n_held * sum(held_after[c]["chi2_dof"] - held_terms[c]["chi2_dof"] for c in held_terms)
+    out["held_out_gain"] = float(gain)
+    mean = lambda d: float(np.mean([v["chi2_dof"] for v in d.values()]))
+    formulas = "; ".join(t["formula"] for t in td.terms)
+    if td.dropped:
+        formulas += f" (which makes {', '.join(td.dropped)} unnecessary)"
+    if gain < STRONG:
+        out["sentence"] = (
+            f"a term fits the training part ({formulas}) but does not predict the held-out part "
+            f"better (held-out log-likelihood gain {gain:.1f} < {STRONG:g})"
+        )
+        return out
+    out["explanation"] = "discovered term"
+    rest = "" if out["p_value_after_terms"] >= alpha / 10 else "; something still remains"
+    out["sentence"] = (
+        f"outside the library the remaining mismatch is described by {formulas} (held-out mean "
+        f"χ²/dof {mean(held_after):.3g} → {mean(held_terms):.3g}, held-out log-likelihood gain "
+        f"{gain:.1f}, p after = {out['p_value_after_terms']:.3g}{rest})"
+    )
     return out
