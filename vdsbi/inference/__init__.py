@@ -29,6 +29,7 @@ from ._loss import (
     atom_indices as atom_indices,
     atomic_apt_loss as atomic_apt_loss,
 )
+from ._npe import npe as npe
 from ._posterior import Posterior as Posterior
 from ._prior import BoxPrior as BoxPrior
 from ._sharding import (

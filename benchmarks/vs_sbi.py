@@ -1,0 +1,162 @@
+"""Side by side with the ``sbi`` toolkit: NPE (NSF, defaults, CPU torch) and ours on the SAME simulations.
+
+Usage (needs ``pip install -e '.[bench]'``):
+    python benchmarks/vs_sbi.py                       # two_moons, slcp at 10³ and 10⁴
+    python benchmarks/vs_sbi.py --quick               # two_moons at 10³, one observation
+    python benchmarks/vs_sbi.py --tasks slcp --budgets 10000   # one cell (resumes the JSON)
+
+For each (task, budget): ``budget`` prior draws and their simulations are made once (our JAX
+simulators of the sbibm tasks, fixed seed); sbi's ``NPE(density_estimator="nsf")`` with
+``train()`` at its defaults, and ours (``vdsbi.inference.npe``, the settings of
+``benchmarks/sbi_tasks.py``), are trained on them. Both are amortised: one network per cell,
+sampled at sbibm's observations 1..n (``--n-obs``) and scored against sbibm's reference
+posterior samples with sbibm's C2ST (scikit-learn MLP, 5-fold). ``*_train_s`` is the training
+wall time (ours includes JIT compilation); sampling and C2ST are not timed.
+
+Writes ``benchmarks/results/vs_sbi.json`` after every cell (finished cells are skipped on a
+re-run) and prints the table.
+"""
+
+import argparse
+import json
+import os
+import sys
+import time
+
+import jax
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import _sbibm  # noqa: E402
+from sbi_tasks import config_for  # noqa: E402
+
+from vdsbi.inference import IdentityEmbedding, Posterior, npe  # noqa: E402
+from vdsbi.tasks import get_task  # noqa: E402
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def simulations(task, budget, seed):
+    key = jax.random.fold_in(jax.random.key(seed), budget)
+    k_theta, k_x = jax.random.split(key)
+    theta = task.prior.sample(k_theta, budget)
+    x, valid = task.simulate(k_x, theta)
+    assert bool(np.all(np.asarray(valid))), "the sbibm tasks have no invalid simulations"
+    return np.asarray(theta, np.float32), np.asarray(x, np.float32)
+
+
+def train_sbi(task, theta, x, seed):
+    """sbi's NPE with a neural spline flow, everything else at sbi's defaults; returns a sampler."""
+    import torch
+    from sbi.inference import NPE
+    from sbi.utils import BoxUniform
+
+    torch.manual_seed(seed)
+    prior = BoxUniform(torch.as_tensor(np.asarray(task.prior.low)), torch.as_tensor(np.asarray(task.prior.high)))
+    inference = NPE(prior=prior, density_estimator="nsf", show_progress_bars=False)
+    t0 = time.perf_counter()
+    inference.append_simulations(torch.as_tensor(theta), torch.as_tensor(x)).train()
+    train_s = time.perf_counter() - t0
+    posterior = inference.build_posterior()
+
+    def sample(x_o, n):
+        with torch.no_grad():
+            s = posterior.sample((n,), x=torch.as_tensor(x_o)[None], show_progress_bars=False)
+        return s.numpy()
+
+    return sample, train_s
+
+
+def train_ours(task, theta, x, budget, seed):
+    key = jax.random.key(seed)
+    t0 = time.perf_counter()
+    flow, info = npe(key, task.prior, theta, x, embedding=IdentityEmbedding(task.dim_x), config=config_for(budget))
+    jax.block_until_ready(flow)
+    train_s = time.perf_counter() - t0
+
+    def sample(x_o, n):
+        return np.asarray(Posterior(flow, x_o).sample(jax.random.fold_in(key, 7), n))
+
+    return sample, train_s, info["epochs"]
+
+
+def run_cell(task_name, budget, n_obs, num_samples, seed):
+    import torch
+
+    task = get_task(task_name)
+    theta, x = simulations(task, budget, seed)
+    sbi_sample, sbi_s = train_sbi(task, theta, x, seed)
+    print(f"  sbi trained in {sbi_s:.1f} s", flush=True)
+    ours_sample, ours_s, epochs = train_ours(task, theta, x, budget, seed)
+    print(f"  ours trained in {ours_s:.1f} s ({epochs} epochs)", flush=True)
+    ours, theirs = [], []
+    for i in range(1, n_obs + 1):
+        x_o, ref = _sbibm.observation(task_name, i), _sbibm.reference_posterior_samples(task_name, i)
+        ours.append(_sbibm.c2st(ref, ours_sample(x_o, num_samples)))
+        theirs.append(_sbibm.c2st(ref, sbi_sample(x_o, num_samples)))
+        print(f"  obs {i}: c2st ours {ours[-1]:.3f}  sbi {theirs[-1]:.3f}", flush=True)
+    return {
+        "task": task_name,
+        "budget": budget,
+        "ours_c2st": float(np.mean(ours)),
+        "sbi_c2st": float(np.mean(theirs)),
+        "ours_train_s": ours_s,
+        "sbi_train_s": sbi_s,
+        "speedup": sbi_s / ours_s,
+        "ours_c2st_per_obs": ours,
+        "sbi_c2st_per_obs": theirs,
+        "ours_epochs": epochs,
+        "n_obs": n_obs,
+        "torch_threads": torch.get_num_threads(),
+    }
+
+
+def table(cells) -> str:
+    lines = [
+        "| task | budget | ours C2ST | sbi C2ST | ours train s | sbi train s | sbi/ours time |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for c in cells:
+        mark = "✓" if c["ours_c2st"] <= c["sbi_c2st"] else "✗"
+        lines.append(
+            f"| {c['task']} | {c['budget']:.0e} | {c['ours_c2st']:.3f} {mark} | {c['sbi_c2st']:.3f} "
+            f"| {c['ours_train_s']:.1f} | {c['sbi_train_s']:.1f} | {c['speedup']:.1f}× |"
+        )
+    return "\n".join(lines)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--tasks", nargs="+", default=["two_moons", "slcp"])
+    ap.add_argument("--budgets", nargs="+", type=int, default=[1_000, 10_000])
+    ap.add_argument("--n-obs", type=int, default=3)
+    ap.add_argument("--num-samples", type=int, default=10_000)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", default=os.path.join(HERE, "results", "vs_sbi.json"))
+    args = ap.parse_args()
+    if args.quick:
+        args.tasks, args.budgets, args.n_obs, args.num_samples = ["two_moons"], [1_000], 1, 2_000
+    cells = [] if args.quick or not os.path.exists(args.out) else json.load(open(args.out))["cells"]
+    for budget in args.budgets:
+        for name in args.tasks:
+            if any(c["task"] == name and c["budget"] == budget for c in cells):
+                continue
+            print(f"cell {name} {budget}", flush=True)
+            cells.append(run_cell(name, budget, args.n_obs, args.num_samples, args.seed))
+            print(table(cells), flush=True)
+            if not args.quick:
+                _save(args.out, cells)
+
+
+def _save(path, cells):
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    d = jax.devices()[0]
+    out = {"cells": cells, "device": f"{d.platform}:{d.device_kind}", "protocol": __doc__}
+    with open(path + ".tmp", "w") as f:
+        json.dump(out, f, indent=1)
+    os.replace(path + ".tmp", path)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,58 @@
+"""Amortised NPE on simulations the caller already has (no simulator, no rounds)."""
+
+from typing import Any
+
+import jax
+import numpy as np
+from jaxtyping import PRNGKeyArray
+
+from ._apt import NPEConfig, build_flow
+from ._embeddings import AbstractEmbedding
+from ._flow import ConditionalFlow
+from ._loss import MaximumLikelihoodLoss
+from ._prior import BoxPrior
+from ._train import fit
+
+
+def npe(
+    key: PRNGKeyArray,
+    prior: BoxPrior,
+    theta: np.ndarray,
+    x: np.ndarray,
+    *,
+    embedding: AbstractEmbedding,
+    config: NPEConfig = NPEConfig(),
+    mesh=None,
+) -> tuple[ConditionalFlow, dict[str, Any]]:
+    """Train ``q(θ | x)`` by maximum likelihood on the pairs ``(theta, x)`` (prior draws).
+
+    The same estimator as round 1 of :func:`apt`, for a fixed set of simulations (e.g. to
+    compare with another toolkit on identical data). A random ``config.validation_fraction`` of
+    the pairs is held out for early stopping. Returns ``(flow, info)``; wrap the flow in a
+    :class:`Posterior` to sample at an observation.
+    """
+    theta, x = np.asarray(theta, np.float32), np.asarray(x, np.float32)
+    if theta.ndim != 2 or theta.shape[1] != prior.dim or x.shape[0] != theta.shape[0]:
+        raise ValueError(f"need theta (N, {prior.dim}) and x (N, ...), got {theta.shape} and {x.shape}")
+    k_split, k_init, k_train = jax.random.split(key, 3)
+    m = theta.shape[0]
+    is_val = np.zeros(m, bool)
+    n_val = max(1, round(config.validation_fraction * m))
+    is_val[np.asarray(jax.random.permutation(k_split, m))[:n_val]] = True
+    flow = build_flow(k_init, prior, embedding, theta[~is_val], x[~is_val], config)
+    return fit(
+        k_train,
+        flow,
+        theta,
+        x,
+        np.ones(m, bool),
+        is_val,
+        MaximumLikelihoodLoss(),
+        batch_size=config.batch_size,
+        learning_rate=config.learning_rate,
+        weight_decay=config.weight_decay,
+        clip_norm=config.clip_norm,
+        max_epochs=config.max_epochs,
+        patience=config.patience,
+        mesh=mesh,
+    )
