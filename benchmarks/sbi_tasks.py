@@ -8,8 +8,11 @@ Writes ``benchmarks/results/sbi_tasks.json`` after every finished cell (nothing 
 run is interrupted) and ``benchmarks/results/sbi_tasks.md`` with the table.
 
 Protocol (differences from sbibm are stated, not hidden):
-* observations 1..n_obs of our own tasks (θ_o ~ prior, x_o ~ simulator, fixed seeds);
-  reference posteriors are ours (exact for two_moons / gaussian_* ; MCMC for slcp);
+* ``--observations sbibm`` (default): sbibm's own observations 1..n_obs and its reference
+  posterior samples, read from the sbibm wheel (downloaded without dependencies into a cache at
+  run time, see ``benchmarks/_sbibm.py``), scored with sbibm's C2ST (scikit-learn MLP, 5-fold;
+  needs ``pip install -e '.[bench]'``). ``--observations ours``: the project's own tasks'
+  observations and reference posteriors, scored with ``vdsbi.diagnostics.c2st`` (JAX);
 * C2ST on ``--num-samples`` (default 10 000, as sbibm) posterior vs reference samples;
 * NPE is amortised: ONE network per (task, budget), trained once and evaluated at every
   observation (sbibm retrains per observation); ``train_s`` is that single training time;
@@ -22,14 +25,18 @@ import dataclasses
 import fcntl
 import json
 import os
+import sys
 import time
 
 import jax
 import numpy as np
 
-from vdsbi.diagnostics import c2st
-from vdsbi.inference import IdentityEmbedding, NPEConfig, apt
-from vdsbi.tasks import get_task
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import _sbibm  # noqa: E402
+
+from vdsbi.diagnostics import c2st  # noqa: E402
+from vdsbi.inference import IdentityEmbedding, NPEConfig, apt  # noqa: E402
+from vdsbi.tasks import get_task  # noqa: E402
 
 PUBLISHED = {  # sbibm (Lueckmann et al. 2021), mean C2ST over 10 observations, sbi + NSF
     ("two_moons", "npe"): (0.725, 0.606, 0.542),
@@ -52,14 +59,33 @@ def config_for(budget: int) -> NPEConfig:
     )
 
 
-def run_cell(task_name, method, budget, n_obs, num_samples, seed):
+class _Observations:
+    """Observation ``i``, its reference samples and the C2ST: sbibm's, or the project's tasks'."""
+
+    def __init__(self, task, source):
+        self.task, self.source = task, source
+
+    def x(self, i):
+        if self.source == "sbibm":
+            return _sbibm.observation(self.task.name, i)
+        return self.task.observation(i)[1]
+
+    def score(self, key, i, samples, num_samples):
+        if self.source == "sbibm":
+            ref = _sbibm.reference_posterior_samples(self.task.name, i)[:num_samples]
+            return _sbibm.c2st(ref, np.asarray(samples))
+        return c2st(key, self.task.reference_posterior_samples(i, num_samples), samples)
+
+
+def run_cell(task_name, method, budget, n_obs, num_samples, seed, source="sbibm"):
     task = get_task(task_name)
+    obs = _Observations(task, source)
     cfg = config_for(budget)
     emb = IdentityEmbedding(task.dim_x)
     key = jax.random.fold_in(jax.random.key(seed), budget)
     scores, times, invalid = [], [], 0
     if method == "npe":
-        _, x1 = task.observation(1)
+        x1 = obs.x(1)
         t0 = time.perf_counter()
         post, state = apt(
             key, task.simulate, task.prior, x1, embedding=emb, rounds=1, sims_per_round=budget, config=cfg
@@ -67,7 +93,7 @@ def run_cell(task_name, method, budget, n_obs, num_samples, seed):
         times.append(time.perf_counter() - t0)
         invalid += state.num_invalid
     for i in range(1, n_obs + 1):
-        _, x_o = task.observation(i)
+        x_o = obs.x(i)
         if method == "apt":
             t0 = time.perf_counter()
             post, state = apt(
@@ -83,8 +109,7 @@ def run_cell(task_name, method, budget, n_obs, num_samples, seed):
             times.append(time.perf_counter() - t0)
             invalid += state.num_invalid
         samples = post.sample(jax.random.fold_in(key, 1000 + i), num_samples, x=x_o)
-        ref = task.reference_posterior_samples(i, num_samples)
-        scores.append(c2st(jax.random.fold_in(key, 2000 + i), ref, samples))
+        scores.append(obs.score(jax.random.fold_in(key, 2000 + i), i, samples, num_samples))
         print(f"  {task_name} {method} {budget} obs {i}: c2st={scores[-1]:.3f}", flush=True)
     return {
         "task": task_name,
@@ -127,7 +152,8 @@ def main():
     ap.add_argument("--tasks", nargs="+", default=list(TASKS))
     ap.add_argument("--methods", nargs="+", default=["npe", "apt"])
     ap.add_argument("--budgets", nargs="+", type=int, default=list(BUDGETS))
-    ap.add_argument("--n-obs", type=int, default=5)
+    ap.add_argument("--n-obs", type=int, default=10)
+    ap.add_argument("--observations", choices=["sbibm", "ours"], default="sbibm")
     ap.add_argument("--num-samples", type=int, default=10_000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=os.path.join(HERE, "results", "sbi_tasks.json"))
@@ -135,18 +161,28 @@ def main():
     if args.quick:
         args.tasks, args.budgets, args.n_obs = ["two_moons"], [1_000], 2
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
+    if _source(args.out) not in (None, args.observations):  # never mix the two protocols
+        raise SystemExit(f"{args.out} holds {_source(args.out)!r} observations; pass another --out")
     done = {_key(r) for r in _load(args.out)}  # resume: finished cells are skipped
     cells = [(b, m, t) for b in sorted(args.budgets) for m in args.methods for t in args.tasks]
     for b, m, t in cells:
         if (t, m, b) in done:
             continue
         print(f"cell {t} {m} {b}", flush=True)
-        results = _save(args.out, run_cell(t, m, b, args.n_obs, args.num_samples, args.seed))
+        cell = run_cell(t, m, b, args.n_obs, args.num_samples, args.seed, args.observations)
+        results = _save(args.out, cell, args.observations)
         print(table(results), flush=True)
 
 
 def _key(r):
     return (r["task"], r["method"], r["budget"])
+
+
+def _source(path):
+    if not os.path.exists(path):
+        return None
+    with open(path) as f:
+        return json.load(f).get("observations", "ours")
 
 
 def _load(path):
@@ -156,7 +192,7 @@ def _load(path):
         return json.load(f).get("results", [])
 
 
-def _save(path, result):
+def _save(path, result, source):
     """Merge one finished cell into the JSON under a lock, so several workers (e.g. one per
     core, each given other --tasks/--budgets) can fill the same grid without losing cells."""
     with open(path + ".lock", "w") as lock:
@@ -167,13 +203,15 @@ def _save(path, result):
             for i, (b, m, t) in enumerate((b, m, t) for b in BUDGETS for m in ("npe", "apt") for t in TASKS)
         }
         results.sort(key=lambda r: order.get(_key(r), len(order)))
+        d = jax.devices()[0]
         meta = {
             "devices": [str(d) for d in jax.devices()],
+            "device": f"{d.platform}:{d.device_kind}",
             "config": {str(b): dataclasses.asdict(config_for(b)) for b in BUDGETS},
             "protocol": __doc__,
         }
         with open(path + ".tmp", "w") as f:
-            json.dump({"results": results, "meta": meta}, f, indent=1)
+            json.dump({"results": results, "observations": source, "meta": meta}, f, indent=1)
         os.replace(path + ".tmp", path)
         md = os.path.splitext(path)[0] + ".md"
         with open(md + ".tmp", "w") as f:
