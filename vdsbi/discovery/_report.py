@@ -198,6 +198,8 @@ def _window_spans(windows: Problem, train_fraction: float) -> dict:
         ],
         "held_out_from_s": held_out_from(windows),
         "train_fraction": train_fraction,
+        # Where the drive is at the limit the model cannot follow: located, left out, said why.
+        "left_out": [r for r in windows.description.get("rejected", []) if str(r[2]).startswith("limit")],
     }
 
 
@@ -236,6 +238,8 @@ def markdown(rep: dict) -> str:
     L.append(f"- channels: {', '.join(loc['channels']) or '—'}")
     L.append(f"- time windows (s): {', '.join(f'{a:.1f}–{b:.1f}' for a, b in loc['windows']) or '—'}")
     L.append(f"- bands (Hz): {', '.join(f'{a:g}–{b:g}' for a, b in loc['bands_hz']) or '—'}")
+    for a, b, why in rep.get("windows", {}).get("left_out", []):
+        L.append(f"- left out {a:.1f}–{b:.1f} s: {why}")
     sig = [
         f"{ch}~{inp} {v['peak']:+.2f} @ {v['lag_s']:+.2f} s"
         for ch, d in loc["input_xcorr"].items()
