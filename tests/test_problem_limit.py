@@ -41,3 +41,19 @@ def test_make_problem_cuts_the_slide_out_and_says_why():
     keep = ProblemSettings(longitudinal="speed", max_window=5.0, limit_handling="keep")
     kept = make_problem(rec, veh, keep)
     assert any(w.t0 < 20.3 < w.t1 for w in kept.windows)
+
+
+def test_torques_that_do_not_explain_the_speed_are_flagged():
+    # Torques that would accelerate the car at 1.5 m/s² while it keeps 25 m/s: commanded, not applied.
+    veh = default_vehicle()
+    rec = _slalom(None)
+    cols = {"t": rec.t, "steer": rec.steer, **rec.channels}
+    push = 1.5 * veh.mass * veh.wheel_radius
+    pushed = {"torque_front": np.full_like(rec.t, push), "torque_rear": 0 * rec.t}
+    bad = build_recording(cols | pushed, "x.csv")
+    prob = make_problem(bad, veh, ProblemSettings(max_window=10.0))
+    assert prob.longitudinal == "torque"
+    assert any("do not explain the measured speed" in w for w in prob.warnings)
+    # Torques that balance (a steady 25 m/s needs none here): no warning.
+    fine = build_recording(cols | {"torque_front": 0 * rec.t, "torque_rear": 0 * rec.t}, "y.csv")
+    assert not make_problem(fine, veh, ProblemSettings(max_window=10.0)).warnings

@@ -273,6 +273,8 @@ def _describe(prob: Problem, say: Callable[[str], None]) -> None:
     info = prob.summary()
     say(f"{prob.longitudinal}-driven; {info['how']}; channels {', '.join(prob.channels)}")
     say(f"fitted {info['train_seconds']:.1f} s, held out {info['held_out_seconds']:.1f} s")
+    for w in prob.warnings:
+        say(f"warning: {w}")
     estimated = any(s.startswith("estimated") for s in prob.noise_source.values())
     say(
         "noise std "
@@ -379,7 +381,8 @@ def _warnings(samples: np.ndarray, summary: dict, box, names, longitudinal: str)
     if rec is None:
         rec = summary["recording"]
     ppc = summary["ppc"]
-    return trust_warnings(
+    problem = [{"kind": "recording", "message": w} for w in summary["problem"].get("warnings", ())]
+    return problem + trust_warnings(
         samples,
         list(summary["parameters"]),
         box,

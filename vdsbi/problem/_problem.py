@@ -17,7 +17,7 @@ import numpy as np
 from ..io import InputError, Recording
 from ..simulator import CHANNELS, GRAVITY, Decimator, Inputs, Vehicle
 from ._limit import slides
-from ._measured import measured_longitudinal, smoothed_yaw_rate
+from ._measured import TORQUE_SPEED_TOLERANCE, measured_longitudinal, smoothed_yaw_rate, torque_speed_error
 from ._noise import raw_noise_std
 from ._windows import Window, choose_windows
 
@@ -218,6 +218,7 @@ class Problem:
             else {"cutoff_hz": self.decimator.cutoff, "output_rate_hz": 1.0 / self.compared_dt},
             "noise_std": {c: float(s) for c, s in zip(self.channels, self.sigma)},
             "noise_source": dict(self.noise_source),
+            "warnings": list(self.warnings),
             **self.description,
         }
 
@@ -387,6 +388,7 @@ def make_problem(rec: Recording, vehicle: Vehicle, settings: ProblemSettings = P
     valid, train, held = _masks(windows, t_out, lengths, rec.dt, settings.burn_in)
     segments = [(w.t0, w.t1) for w in windows]
     sigma_raw, source = raw_noise_std(rec, vehicle, channels, segments)
+    warnings = list(rec.warnings) + _torque_warning(rec, vehicle, mode, segments)
     gain = 1.0 if decimator is None else float(np.sqrt(np.sum(np.asarray(decimator.taps) ** 2)))
     return Problem(
         source=rec.source,
@@ -411,8 +413,20 @@ def make_problem(rec: Recording, vehicle: Vehicle, settings: ProblemSettings = P
         sigma_raw=sigma_raw,
         noise_source=source,
         description=described,
-        warnings=tuple(rec.warnings),
+        warnings=tuple(warnings),
     )
+
+
+def _torque_warning(rec: Recording, vehicle: Vehicle, mode: str, segments) -> list[str]:
+    if mode != "torque":
+        return []
+    err = torque_speed_error(rec, vehicle.wheel_radius, vehicle.mass, segments)
+    if err is None or err <= TORQUE_SPEED_TOLERANCE:
+        return []
+    return [
+        f"the recorded torques do not explain the measured speed (a point mass driven by them misses "
+        f"it by {err:.1f} m/s RMS per window): commanded, not applied? Try --longitudinal speed"
+    ]
 
 
 def _limit_stretches(rec: Recording, vehicle: Vehicle, settings: ProblemSettings):
