@@ -18,3 +18,37 @@ def test_demo_recording_is_valid_and_keeps_rolling(tmp_path, seed):
     assert np.min(rec.channels["vx"]) > 4.0  # noisy vx; the noise-free speed stays > 5 m/s
     saved = json.loads((tmp_path / "truth.json").read_text())
     assert saved["concealed_effect"] == truth["concealed_effect"]
+
+
+def test_demo_runs_the_whole_loop_into_one_folder(tmp_path):
+    """A tiny demo: the base posterior is flagged (the band misses ax) with the diagnose command,
+    diagnose names the bias, the second identify models it; one report.html per folder, each
+    referencing only files that exist, and no file naming the temporary working folder."""
+    from report_checks import check_folder
+
+    from vdsbi import api
+
+    budget = api.DemoBudget(
+        duration=3.0,
+        rounds=1,
+        sims=100,
+        epochs=3,
+        diagnose={"candidates": ("sensor_bias",), "top_pairs": 0, "final_dt": 0.005, "num_draws": 100},
+    )
+    out = tmp_path / "demo"
+    res = api.demo(out, budget=budget)
+    (miss,) = [w for w in res.identified.summary["warnings"] if w["kind"] == "predictive_miss"]
+    assert miss["channels"]["ax"] < 0.5 and "omega_front" not in miss["channels"]
+    assert (
+        f"vdsbi diagnose {out}/recording.csv --vehicle {out}/vehicle.json --out {out}/diagnose"
+        in miss["message"]
+    )
+    assert res.refined is not None and res.refined.summary["effects"] == ["sensor_bias"]
+    for folder in (out, out / "identify", out / "diagnose", out / "identify-sensor_bias"):
+        check_folder(folder)
+    page = (out / "report.html").read_text()
+    assert "sensor_bias.ax" in page and "truth" in page
+    for name in ("before_after.png", "pairplot_0.png", "pairplot_1.png"):
+        assert (out / name).stat().st_size > 0
+    posterior = json.loads((out / "identify" / "posterior.json").read_text())
+    assert posterior["recording"] == str(out / "recording.csv")

@@ -1,5 +1,5 @@
 """Python API mirroring the CLI: `check`, `simulate`, `identify`, `sample`, `demo`,
-`observability`, `design`, `diagnose`.
+`observability`, `design`, `diagnose`, `export`.
 
 Each function takes paths or in-memory objects and returns a result object; the CLI commands
 parse their arguments, call these and print. `identify` with `out_dir` writes exactly what
@@ -14,9 +14,21 @@ starts quickly.
 """
 
 from ._check import CheckResult as CheckResult, check as check
-from ._demo import DemoResult as DemoResult, demo as demo, demo_recording as demo_recording
+from ._demo import (
+    DemoBudget as DemoBudget,
+    DemoResult as DemoResult,
+    demo as demo,
+    demo_recording as demo_recording,
+    true_values as true_values,
+)
 from ._design import DesignReport as DesignReport, design as design
 from ._diagnose import diagnose as diagnose
+from ._export import (
+    EXPORT_FORMATS as EXPORT_FORMATS,
+    corner_masses as corner_masses,
+    export as export,
+    write_export as write_export,
+)
 from ._identify import (
     IdentifyResult as IdentifyResult,
     identify as identify,
@@ -30,10 +42,16 @@ from ._outputs import (
     RUN_FILE as RUN_FILE,
     checkpoint_dir as checkpoint_dir,
     output_dir as output_dir,
+    plot_posterior as plot_posterior,
     summarise as summarise,
     write_atomically as write_atomically,
     write_outputs as write_outputs,
 )
-from ._plots import drive_plot as drive_plot, pairplot as pairplot, ppc_plot as ppc_plot
+from ._plots import (
+    display_unit as display_unit,
+    drive_plot as drive_plot,
+    pairplot as pairplot,
+    ppc_plot as ppc_plot,
+)
 from ._simulate import SimulateResult as SimulateResult, simulate as simulate
 from ._validate import PROFILE_V0 as PROFILE_V0

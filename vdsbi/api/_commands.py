@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import shlex
 from collections.abc import Sequence
+from pathlib import Path
 
 
 def shown(path: str | os.PathLike | None, default: str) -> str:
@@ -13,8 +14,8 @@ def shown(path: str | os.PathLike | None, default: str) -> str:
 
 
 def diagnose_command(recording, vehicle, out, longitudinal: str = "auto") -> str:
-    """`vdsbi diagnose REC --vehicle V --out OUT` (OUT: the identify folder's sibling)."""
-    target = "diagnose" if out is None else f"{str(out).rstrip('/')}-diagnose"
+    """`vdsbi diagnose REC --vehicle V --out OUT` (OUT: `diagnose` beside the identify folder)."""
+    target = "diagnose" if out is None else str(Path(out).parent / "diagnose")
     cmd = (
         f"vdsbi diagnose {shown(recording, 'REC')} --vehicle {shown(vehicle, 'VEHICLE')} "
         f"--out {shlex.quote(target)}"
@@ -23,8 +24,10 @@ def diagnose_command(recording, vehicle, out, longitudinal: str = "auto") -> str
 
 
 def identify_command(recording, vehicle, out, effects: Sequence[str], longitudinal: str = "auto") -> str:
-    """`vdsbi identify REC --vehicle V --out OUT --effects NAMES` with the effects a diagnosis named."""
-    target = "identify" if out is None else f"{str(out).rstrip('/')}-identify"
+    """`vdsbi identify REC --vehicle V --out identify-NAMES --effects NAMES` with the effects a
+    diagnosis named (the folder beside the diagnosis' `out`)."""
+    name = "identify-" + ("-".join(effects) or "base")
+    target = name if out is None else str(Path(out).parent / name)
     cmd = (
         f"vdsbi identify {shown(recording, 'REC')} --vehicle {shown(vehicle, 'VEHICLE')} "
         f"--out {shlex.quote(target)} --effects {','.join(effects) if effects else 'none'}"

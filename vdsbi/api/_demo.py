@@ -1,9 +1,11 @@
-"""`demo`: simulate a drive with a concealed effect, identify θ with the base model, diagnose
-the mismatch, and leave everything in one folder."""
+"""`demo`: the whole loop on a drive with a concealed effect: identify θ with the base model
+(flagged), diagnose the mismatch (names the effect), identify again with it, and a before/after
+page, all in one folder."""
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import os
 import time
@@ -12,7 +14,9 @@ from pathlib import Path
 
 from ._diagnose import diagnose
 from ._identify import IdentifyResult, identify
-from ._outputs import output_dir
+from ._outputs import output_dir, plot_posterior
+from ._pages import demo_page
+from ._plots import before_after_plot
 
 #: The effect hidden in the demo recording (identify's model does not know it).
 CONCEALED = {"sensor_bias": {"ax": 0.3, "ay": -0.25, "yaw_rate": 0.0}}
@@ -21,15 +25,38 @@ NOISE_STD = {"ax": 0.05, "ay": 0.05, "yaw_rate": 0.003, "omega_front": 0.1, "ome
 DEMO_V0 = 15.0
 
 
+@dataclasses.dataclass(frozen=True)
+class DemoBudget:
+    """How much the demo computes.
+
+    Attributes:
+        duration: the drive, s.
+        rounds, sims, epochs: APT budget of each identification (epochs None: the default).
+        diagnose: options of the diagnosis (`vdsbi.discovery.DiagnoseSettings` fields).
+    """
+
+    duration: float = 20.0
+    rounds: int = 2
+    sims: int = 1000
+    epochs: int | None = None
+    diagnose: dict = dataclasses.field(default_factory=dict)
+
+
+#: --quick: a 10 s drive, 2 x 300 simulations, no diagnosis plots.
+QUICK = DemoBudget(duration=10.0, sims=300, diagnose={"plots": False})
+
+
 @dataclasses.dataclass
 class DemoResult:
-    """Where the demo wrote its files, what `identify` found, the diagnosis in one line, and
-    the wall time in seconds."""
+    """Where the demo wrote its files, what `identify` found with the base model and then with
+    the named effects (None when none was named), the diagnosis in one line, and the wall time
+    in seconds."""
 
     out: Path
     identified: IdentifyResult
     diagnosis: str
     seconds: float
+    refined: IdentifyResult | None = None
 
 
 def demo_recording(out: str | os.PathLike, *, duration: float, seed: int) -> dict:
@@ -100,53 +127,87 @@ def demo(
     run_diagnosis: bool = True,
     progress: bool = False,
     log: Callable[[str], None] | None = None,
+    budget: DemoBudget | None = None,
 ) -> DemoResult:
-    """Simulate, identify and diagnose a drive with a concealed sensor bias, into `out`
-    (default: vdsbi-demo-<time>): recording.csv, vehicle.json, truth.json, identify/,
-    diagnose/ and README.txt.
+    """The whole loop on a drive with a concealed sensor bias, into `out` (default:
+    vdsbi-demo-<time>): simulate it (recording.csv, vehicle.json, truth.json); identify θ with the
+    base model (identify/, flagged); diagnose (diagnose/, names the effect); identify again with
+    the named effect (identify-<effect>/); a before/after page (report.html, before_after.png,
+    pairplot_0.png, pairplot_1.png with the truth marked).
 
     Args:
-        quick: a 10 s drive, 2 x 300 simulations, no diagnosis plots (default 20 s, 2 x 1000).
+        quick: `QUICK`'s budget (default `DemoBudget()`: 20 s, 2 x 1000 simulations).
         seed: the drive's and the methods' seed.
-        run_diagnosis: run the mismatch diagnosis after identify.
+        run_diagnosis: diagnose and re-identify after the first identify.
         progress: tqdm bars while identifying.
         log: where progress lines go (default: nowhere).
+        budget: overrides `quick`.
     """
     t_start = time.perf_counter()
     name = Path(out or time.strftime("vdsbi-demo-%Y%m%d-%H%M%S"))
     say = log or (lambda s: None)
-    duration, rounds, sims = (10.0, 2, 300) if quick else (20.0, 2, 1000)
+    b = budget or (QUICK if quick else DemoBudget())
+    run = functools.partial(_identify, budget=b, seed=seed, progress=progress, say=say)
     with output_dir(name) as d:
-        say(f"1/3 simulating a {duration:g} s drive of the built-in vehicle with a concealed effect")
-        truth = demo_recording(d, duration=duration, seed=seed)
+        say(f"1/5 simulating a {b.duration:g} s drive of the built-in vehicle with a concealed effect")
+        truth = demo_recording(d, duration=b.duration, seed=seed)
         rec, veh = _drive(d, name)
-        say(f"2/3 identify: {rounds} rounds x {sims} simulations (stats embedding)")
-        res = identify(
-            rec,
-            veh,
-            rounds=rounds,
-            sims=sims,
-            embedding="stats",
-            seed=seed,
-            out_dir=d / "identify",
-            progress=progress,
-            log=say,
-        )
-        lines = [res.table(), "", "true values:"]
-        lines += [f"  {k:<10} {v:.4g}" for k, v in truth["theta"].items()]
-        (d / "identify" / "table.txt").write_text("\n".join(lines) + "\n")
-        say(res.table())
-        diagnosis = "skipped (--no-diagnose)"
+        say(f"2/5 identify with the base model: {b.rounds} rounds x {b.sims} simulations")
+        base = run(rec, veh, d, name, "identify", ())
+        runs, diagnosis, report = [("base model", "identify", base)], "skipped (--no-diagnose)", None
         if run_diagnosis:
-            say("3/3 diagnose: looking for missing physics")
-            diagnosis = _diagnosis(d, rec, veh, seed=seed, quiet=log is None, plots=not quick)
-        (d / "README.txt").write_text(
-            "vdsbi demo\n"
-            f"recording.csv, vehicle.json: a {duration:g} s simulated drive; truth.json holds the truth\n"
-            "identify/: posterior.json, samples.csv, pairplot.png, ppc.png, estimator.npz, table.txt\n"
-            f"diagnose/: {diagnosis}\n"
-        )
-    return DemoResult(name.resolve(), res, diagnosis, time.perf_counter() - t_start)
+            say("3/5 diagnose: looking for missing physics")
+            report = diagnose(
+                rec,
+                veh,
+                d / "diagnose",
+                names=_names(name, "diagnose"),
+                seed=seed,
+                quiet=log is None,
+                **b.diagnose,
+            ).report
+            diagnosis = _diagnosis(report)
+            if report["chosen"]:
+                say(f"4/5 identify again, as diagnose says: {report['identify_command']}")
+                folder = "identify-" + "-".join(report["chosen"])
+                runs.append(
+                    (
+                        f"with {', '.join(report['chosen'])}",
+                        folder,
+                        run(rec, veh, d, name, folder, report["chosen"]),
+                    )
+                )
+        say("5/5 the before/after page")
+        _before_after(d, truth, runs, report)
+        (d / "README.txt").write_text(_readme(b, runs, diagnosis))
+    refined = runs[1][2] if len(runs) > 1 else None
+    return DemoResult(name.resolve(), base, diagnosis, time.perf_counter() - t_start, refined)
+
+
+def _names(name: Path, folder: str) -> tuple[Path, Path, Path]:
+    """(recording, vehicle, output folder) as the user will find them."""
+    return name / "recording.csv", name / "vehicle.json", name / folder
+
+
+def _identify(rec, veh, d: Path, name: Path, folder: str, effects, *, budget, seed, progress, say):
+    """One identification of the demo drive into d/folder, its table in table.txt."""
+    res = identify(
+        rec,
+        veh,
+        rounds=budget.rounds,
+        sims=budget.sims,
+        epochs=budget.epochs,
+        embedding="stats",
+        seed=seed,
+        effects=list(effects),
+        out_dir=d / folder,
+        progress=progress,
+        log=say,
+        names=_names(name, folder),
+    )
+    (d / folder / "table.txt").write_text(res.table() + "\n")
+    say(res.table())
+    return res
 
 
 def _drive(d: Path, name: Path):
@@ -155,19 +216,50 @@ def _drive(d: Path, name: Path):
     from ..io import load_drive
 
     rec, veh = load_drive(d / "recording.csv", d / "vehicle.json")
-    return dataclasses.replace(rec, source=str(name / "recording.csv")), veh
+    warnings = [w.replace(str(d), str(name)) for w in rec.warnings]
+    return dataclasses.replace(rec, source=str(name / "recording.csv"), warnings=warnings), veh
 
 
-def _diagnosis(d: Path, rec, veh, *, seed: int, quiet: bool, plots: bool) -> str:
-    """Run the diagnosis on the demo drive into d/diagnose; what it found, in one line."""
-    dres = diagnose(rec, veh, d / "diagnose", seed=seed, quiet=quiet, plots=plots)
-    chosen = ", ".join(dres.chosen) or "none"
-    msg = f"mismatch detected: {dres.mismatch_detected}; effects named: {chosen}"
-    msg += f" (concealed: {', '.join(CONCEALED)}); verdict: {dres.report['verdict']}"
-    if dres.mismatch_detected:
-        # the identify step above used the base model on this very drive
-        msg += (
-            "\n  so the identify result above came from a misspecified model: re-identify "
-            "with the named effect (report.md has θ refitted with it)"
+def true_values(truth: dict) -> dict[str, float]:
+    """The truth by parameter name: θ and the concealed effects' parameters (``sensor_bias.ax``)."""
+    out = dict(truth["theta"])
+    for e, params in truth["concealed_effect"].items():
+        out |= {f"{e}.{k}": float(v) for k, v in params.items()}
+    return out
+
+
+def _before_after(d: Path, truth: dict, runs, report) -> None:
+    """report.html, before_after.png and one pair plot per identification, truth marked."""
+    values = true_values(truth)
+    for k, (label, _, res) in enumerate(runs):
+        plot_posterior(
+            res.summary, res.samples, d / f"pairplot_{k}.png", truth=values, title=f"posterior, {label}"
         )
-    return msg
+    before_after_plot(
+        [(label, res) for label, _, res in runs],
+        values,
+        d / "before_after.png",
+        title=f"concealed {', '.join(CONCEALED)}: {' vs '.join(label for label, _, _ in runs)}",
+    )
+    page = demo_page(
+        values, [(label, f, res.summary) for label, f, res in runs], report, d, ", ".join(CONCEALED)
+    )
+    (d / "report.html").write_text(page)
+
+
+def _diagnosis(report: dict) -> str:
+    """What the diagnosis found, in one line."""
+    chosen = ", ".join(report["chosen"]) or "none"
+    msg = f"mismatch detected: {report['mismatch_detected']}; effects named: {chosen}"
+    return msg + f" (concealed: {', '.join(CONCEALED)}); verdict: {report['verdict']}"
+
+
+def _readme(b: DemoBudget, runs, diagnosis: str) -> str:
+    lines = [
+        "vdsbi demo: open report.html",
+        f"recording.csv, vehicle.json: a {b.duration:g} s simulated drive; truth.json holds the truth",
+    ]
+    lines += [
+        f"{f}/: identify, {label} (report.html, posterior.json, samples.csv, ...)" for label, f, _ in runs
+    ]
+    return "\n".join([*lines, f"diagnose/: {diagnosis}", ""])

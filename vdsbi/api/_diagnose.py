@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ._commands import identify_command
+from ._pages import diagnose_page
 
 
 def diagnose(
@@ -20,7 +21,7 @@ def diagnose(
 ):
     """`vdsbi.discovery.diagnose` (imported on first use: it pulls in the discovery layer), with
     `report["identify_command"]`: the `vdsbi identify … --effects NAMES` that models the effects
-    it chose, written into report.json and report.md.
+    it chose, written into report.json and report.md; report.html shows the tables and figures.
 
     Args:
         recording, vehicle, out_dir, **options: as `vdsbi.discovery.diagnose`.
@@ -41,4 +42,5 @@ def diagnose(
     if out_dir is not None:
         plots = options.get("plots", getattr(options.get("settings"), "plots", True))
         write_report(found, Path(out_dir), plots=plots)
+        (Path(out_dir) / "report.html").write_text(diagnose_page(found.report, out_dir))
     return found

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..io import InputError
 from ..simulator import PARAM_NAMES, PARAM_UNITS
+from ._pages import identify_page
 from ._plots import pairplot, ppc_plot
 
 #: Files `identify` writes into its output directory.
@@ -136,8 +137,9 @@ def summarise(
 
 
 def write_outputs(out: Path, result: Any, prob: Any, ppc: dict[str, np.ndarray]) -> None:
-    """samples.csv, posterior.json, the estimator, pairplot.png and ppc.png of an `IdentifyResult`,
-    written into a temporary folder inside `out` and moved in only when all are written."""
+    """samples.csv, posterior.json, the estimator, pairplot.png, ppc.png and report.html of an
+    `IdentifyResult`, written into a temporary folder inside `out` and moved in only when all are
+    written."""
     import pandas as pd
 
     tmp = Path(tempfile.mkdtemp(prefix=".outputs-", dir=out))
@@ -148,9 +150,36 @@ def write_outputs(out: Path, result: Any, prob: Any, ppc: dict[str, np.ndarray])
         )
         (tmp / "posterior.json").write_text(result.to_json() + "\n")
         result.posterior.save(tmp / ESTIMATOR)
-        pairplot(result.samples, names, tmp / "pairplot.png")
+        plot_posterior(result.summary, result.samples, tmp / "pairplot.png")
         ppc_plot(prob, ppc, tmp / "ppc.png")
+        (tmp / "report.html").write_text(identify_page(result.summary, tmp, also=[out]))
         for f in tmp.iterdir():
             os.replace(f, out / f.name)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def plot_posterior(
+    summary: Mapping[str, Any],
+    samples: np.ndarray,
+    path: str | os.PathLike,
+    truth: Mapping[str, float] | None = None,
+    title: str | None = None,
+) -> None:
+    """pairplot.png of an identify summary: over the prior box, in readable units, parameters the
+    drive cannot inform in grey, `--compare` values in green and `truth` (when known) in red."""
+    params = summary["parameters"]
+    names = list(params)
+    given = summary.get("validation", {}).get("reference", {}).get("given")
+    pick = lambda d: None if d is None else np.array([float(d.get(n, np.nan)) for n in names])
+    pairplot(
+        samples,
+        names,
+        path,
+        truth=pick(truth),
+        title=title or f"posterior from {summary['recording']}",
+        box=[params[n]["prior"] for n in names],
+        units=[params[n]["unit"] for n in names],
+        reference=pick(given),
+        faded=[params[n].get("identified") is False for n in names],
+    )

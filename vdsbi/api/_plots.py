@@ -30,41 +30,118 @@ def _pyplot():
     return plt
 
 
+#: Units shown scaled, so that axes read 72 kN/rad rather than 72000.
+SCALED_UNITS = {"N/rad": (1e-3, "kN/rad"), "N": (1e-3, "kN")}
+
+
+def display_unit(unit: str) -> tuple[float, str]:
+    """(factor, label): a value in `unit` times factor reads in label."""
+    return SCALED_UNITS.get(unit, (1.0, unit.replace("^2", "²")))
+
+
 def pairplot(
     samples: np.ndarray,
     labels: Sequence[str],
     path: str | os.PathLike,
     truth: np.ndarray | None = None,
     title: str | None = None,
+    *,
+    box: Sequence[tuple[float, float]] | None = None,
+    units: Sequence[str] | None = None,
+    reference: np.ndarray | None = None,
+    faded: Sequence[bool] | None = None,
 ) -> None:
-    """Histograms on the diagonal, scatter below it, of (N, d) `samples`; `truth` in red."""
+    """Pair plot of (N, d) `samples`: histograms on the diagonal, density contours (50 and 90 %
+    of the mass) over faint points below it.
+
+    Args:
+        truth: (d,) values marked in red (NaN: unknown, not marked).
+        box: per parameter (low, high): the axes span the prior box, so a posterior piled at an
+            edge shows as such.
+        units: per parameter unit; N and N/rad are shown in kN and kN/rad.
+        reference: (d,) values marked in green (e.g. a lab's).
+        faded: parameters drawn grey (the drive cannot inform them).
+    """
     plt = _pyplot()
     d = samples.shape[1]
-    fig, axes = plt.subplots(d, d, figsize=(2.0 * d, 2.0 * d))
+    scale = np.array([display_unit(u)[0] for u in units]) if units is not None else np.ones(d)
+    shown = [f"{n} [{display_unit(u)[1]}]" for n, u in zip(labels, units)] if units is not None else labels
+    x = samples * scale
+    lim = np.asarray(box, float) * scale[:, None] if box is not None else None
+    marks = [(v * scale, c) for v, c in ((truth, "r"), (reference, "g")) if v is not None]
+    fig, axes = plt.subplots(d, d, figsize=(1.9 * d + 0.6, 1.9 * d + 0.4), squeeze=False)
     for i in range(d):
         for j in range(d):
             ax = axes[i, j]
             if j > i:
                 ax.axis("off")
                 continue
+            grey = faded is not None and (faded[i] or faded[j])
+            colour = "0.6" if grey else "C0"
             if i == j:
-                ax.hist(samples[:, i], bins=40, color="C0", alpha=0.8)
-                if truth is not None:
-                    ax.axvline(truth[i], color="r")
+                _diagonal(ax, x[:, i], None if lim is None else lim[i], colour, marks, i)
             else:
-                ax.scatter(samples[:, j], samples[:, i], s=1, alpha=0.3, color="C0")
-                if truth is not None:
-                    ax.plot(truth[j], truth[i], "r+", ms=10)
+                _pair(ax, x[:, j], x[:, i], None if lim is None else (lim[j], lim[i]), colour, marks, j, i)
             if i == d - 1:
-                ax.set_xlabel(labels[j])
+                ax.set_xlabel(shown[j], fontsize=8)
             if j == 0 and i > 0:
-                ax.set_ylabel(labels[i])
+                ax.set_ylabel(shown[i], fontsize=8)
             ax.tick_params(labelsize=6)
+    legend = ["blue: posterior (contours hold 50 / 90 %)"]
+    legend += ["red: truth"] if truth is not None else []
+    legend += ["green: reference"] if reference is not None else []
+    legend += ["grey: not identified by the drive"] if faded is not None and any(faded) else []
+    legend += ["axes span the prior box"] if box is not None else []
+    fig.text(0.98, 0.98, "\n".join(legend), ha="right", va="top", fontsize=9)
     if title is not None:
-        fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
+        fig.suptitle(title, x=0.02, ha="left", fontsize=10)
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    fig.savefig(path, dpi=80)
     plt.close(fig)
+
+
+def _diagonal(ax, v: np.ndarray, lim, colour: str, marks, i: int) -> None:
+    """Histogram of one parameter (over its prior range when given) and the prior's flat density."""
+    ax.hist(v, bins=40, range=None if lim is None else tuple(lim), density=True, color=colour, alpha=0.8)
+    if lim is not None:
+        ax.axhline(1.0 / (lim[1] - lim[0]), color="0.4", ls=":", lw=0.8)
+        ax.set_xlim(*lim)
+    for m, c in marks:
+        if np.isfinite(m[i]):
+            ax.axvline(m[i], color=c, lw=1.2)
+    ax.set_yticks([])
+
+
+def _pair(ax, vx: np.ndarray, vy: np.ndarray, lims, colour: str, marks, j: int, i: int) -> None:
+    """Faint points and the 50 / 90 % highest-density contours of a smoothed 2-D histogram."""
+    ax.scatter(vx, vy, s=1, alpha=0.15, color=colour, rasterized=True)
+    rng = lims if lims is not None else ((vx.min(), vx.max()), (vy.min(), vy.max()))
+    h, xe, ye = np.histogram2d(vx, vy, bins=40, range=[tuple(r) for r in rng])
+    h = _smooth(h)
+    levels = _mass_levels(h, (0.9, 0.5))
+    if np.all(np.diff(levels) > 0):
+        xc, yc = 0.5 * (xe[1:] + xe[:-1]), 0.5 * (ye[1:] + ye[:-1])
+        ax.contour(xc, yc, h.T, levels=levels, colors=colour, linewidths=(0.8, 1.3))
+    if lims is not None:
+        ax.set_xlim(*lims[0])
+        ax.set_ylim(*lims[1])
+    for m, c in marks:
+        if np.isfinite(m[j]) and np.isfinite(m[i]):
+            ax.plot(m[j], m[i], "+", color=c, ms=11, mew=1.8)
+
+
+def _smooth(h: np.ndarray) -> np.ndarray:
+    """`h` convolved with a 5-bin binomial kernel along both axes (a cheap Gaussian)."""
+    k = np.array([1.0, 4.0, 6.0, 4.0, 1.0]) / 16.0
+    h = np.apply_along_axis(lambda r: np.convolve(r, k, "same"), 0, h)
+    return np.apply_along_axis(lambda r: np.convolve(r, k, "same"), 1, h)
+
+
+def _mass_levels(h: np.ndarray, masses: Sequence[float]) -> list[float]:
+    """Density thresholds whose super-level sets hold `masses` of `h`, increasing."""
+    flat = np.sort(h.ravel())[::-1]
+    cum = np.cumsum(flat) / max(flat.sum(), 1e-300)
+    return [float(flat[min(np.searchsorted(cum, m), flat.size - 1)]) for m in masses]
 
 
 def ppc_plot(prob: Any, ppc: dict[str, np.ndarray], path: str | os.PathLike) -> None:
@@ -137,3 +214,90 @@ def drive_plot(rec: Any, theta: np.ndarray, effects: Sequence[str], path: str | 
     fig.tight_layout()
     fig.savefig(path, dpi=110, format="png")
     plt.close(fig)
+
+
+def before_after_plot(
+    runs: Sequence[tuple[str, Any]],
+    truth: dict[str, float],
+    path: str | os.PathLike,
+    channels: Sequence[str] = ("ax", "ay", "yaw_rate"),
+    title: str | None = None,
+) -> None:
+    """Two identifications of one drive side by side: top, each θ parameter's posterior over its
+    prior box with the truth; below, the held-out recording against each run's 90 % predictive band.
+
+    Args:
+        runs: (label, `IdentifyResult` with `problem` and `ppc`) pairs, e.g. before and after
+            modelling an effect (same drive, same windows).
+        truth: true values by parameter name (red lines).
+        channels: channels of the held-out overlay.
+    """
+    plt = _pyplot()
+    names = [n for n in PARAM_NAMES if n in runs[0][1].summary["parameters"]]
+    fig = plt.figure(figsize=(13, 3.0 + 2.1 * len(channels)))
+    grid = fig.add_gridspec(1 + len(channels), len(names), height_ratios=[1.2] + [1.0] * len(channels))
+    colours = ("C3", "C0")
+    for k, n in enumerate(names):
+        ax = fig.add_subplot(grid[0, k])
+        for (label, res), col in zip(runs, colours):
+            p = res.summary["parameters"][n]
+            f, unit = display_unit(p["unit"])
+            i = list(res.summary["parameters"]).index(n)
+            lo, hi = np.asarray(p["prior"]) * f
+            ax.hist(
+                res.samples[:, i] * f,
+                bins=40,
+                range=(lo, hi),
+                density=True,
+                alpha=0.55,
+                color=col,
+                label=label,
+            )
+        if n in truth:
+            ax.axvline(truth[n] * f, color="k", lw=1.5, label="truth")
+        ax.set_xlim(lo, hi)
+        ax.set_yticks([])
+        ax.set_xlabel(f"{n} [{unit}]", fontsize=8)
+        ax.tick_params(labelsize=7)
+    fig.axes[0].legend(fontsize=7, loc="upper left")
+    for r, c in enumerate(channels):
+        ax = fig.add_subplot(grid[1 + r, :])
+        _held_out_bands(ax, runs, c, colours)
+        ax.set_ylabel(f"{c} [{UNITS[c]}]")
+        ax.grid(alpha=0.3)
+        if r == 0:
+            ax.legend(fontsize=7, loc="upper right", ncol=3)
+            ax.set_title(
+                "held-out driving (never fitted): recording vs each posterior's 90 % predictive band",
+                fontsize=9,
+            )
+    ax.set_xlabel("t [s]")
+    if title:
+        fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def _held_out_bands(ax, runs, channel: str, colours) -> None:
+    """The held-out part of every window: each run's 90 % band and the recording."""
+    prob = runs[0][1].problem
+    i = list(prob.channels).index(channel)
+    first = True
+    for w in range(prob.num_windows):
+        m = prob.held[w] & prob.valid[w]
+        if not m.any():
+            continue
+        t = prob.t_out[w][m]
+        for (label, res), col in zip(runs, colours):
+            ppc = res.ppc
+            ax.fill_between(
+                t,
+                ppc["q05"][w, m, i],
+                ppc["q95"][w, m, i],
+                color=col,
+                alpha=0.35,
+                label=label if first else None,
+            )
+        ax.plot(t, prob.y[w, m, i], color="k", lw=0.7, label="recording" if first else None)
+        first = False

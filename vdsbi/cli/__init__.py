@@ -16,6 +16,7 @@ COMMANDS: tuple[str, ...] = (
     "._observability",
     "._design",
     "._diagnose",
+    "._export",
 )
 
 from ..api import output_dir as output_dir  # noqa: E402

@@ -117,9 +117,10 @@ class Vehicle(eqx.Module):
             raise ValueError(f"{source}: key 'prior' must be a mapping param -> [low, high]")
         clean_prior: dict[str, tuple[float, float]] = {}
         for name, bounds in prior.items():
-            if name not in PARAM_NAMES:
+            if name not in PARAM_NAMES and not _effect_parameter(name):
                 raise ValueError(
-                    f"{source}: prior for unknown parameter '{name}' (expected one of {PARAM_NAMES})"
+                    f"{source}: prior for unknown parameter '{name}' (expected one of {PARAM_NAMES} "
+                    "or an effect's EFFECT.PARAM, e.g. sensor_bias.ax)"
                 )
             if (
                 not isinstance(bounds, (list, tuple))
@@ -162,6 +163,15 @@ class Vehicle(eqx.Module):
         }
         box.update(self.prior)
         return box
+
+
+def _effect_parameter(name: str) -> bool:
+    """Whether `name` is an effect's parameter, ``effect.param`` (its prior joins θ's box when
+    the effect is identified)."""
+    from ._effects import EFFECTS  # the registry, read now (effects may register late)
+
+    effect, _, param = str(name).partition(".")
+    return effect in EFFECTS and param in EFFECTS[effect].param_names
 
 
 def check_prior(prior: Mapping[str, tuple[float, float]], vehicle: Vehicle, source: str) -> None:

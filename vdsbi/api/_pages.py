@@ -1,0 +1,270 @@
+"""report.html of `identify` and `diagnose`: the tables and the pictures of a folder on one page."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from ..simulator import PARAM_UNITS
+from . import _html as H
+from ._plots import display_unit
+
+#: Files `identify` leaves beside its page.
+IDENTIFY_FILES = ("posterior.json", "samples.csv", "run.json", "estimator.npz", "pairplot.png", "ppc.png")
+DIAGNOSE_FILES = ("report.json", "report.md", "residual_heatmap.png", "overlay.png", "residual_spectra.png")
+
+
+def fmt(value: float | None, unit: str = "") -> str:
+    """`value` in `unit`'s readable scale (kN/rad, not 72000), 4 significant digits."""
+    if value is None:
+        return "–"
+    return f"{value * display_unit(unit)[0]:.4g}"
+
+
+def parameter_rows(params: Mapping[str, Any], refined: Mapping[str, float] | None = None) -> list[list[str]]:
+    """Rows name, unit, mean, std, 90 % interval, prior[, refined point]."""
+    rows = []
+    for n, p in params.items():
+        u = p["unit"]
+        lo, hi = p["prior"]
+        row = [n, display_unit(u)[1], fmt(p["mean"], u), fmt(p["std"], u)]
+        if p.get("identified") is False:
+            row[2:4] = ["not identified", "–"]
+            row.append("–")
+        else:
+            row.append(f"[{fmt(p['q05'], u)}, {fmt(p['q95'], u)}]")
+        row.append(f"[{fmt(lo, u)}, {fmt(hi, u)}]")
+        if refined:
+            row.append(fmt(refined.get(n), u) if p.get("identified") is not False else "–")
+        rows.append(row)
+    return rows
+
+
+PARAM_HEADER = ["parameter", "unit", "mean", "std", "90 % interval", "prior"]
+
+
+def warnings_block(summary: Mapping[str, Any]) -> str:
+    ws = summary.get("warnings") or []
+    if not ws:
+        return H.paragraph(
+            "No warning: no posterior mass piled at the prior's edges, and the predictive band "
+            "covers every channel.",
+            "ok",
+        )
+    return "".join(H.paragraph("Warning: " + w["message"], "warn") for w in ws)
+
+
+def validation_rows(summary: Mapping[str, Any]) -> list[list[str]]:
+    """Per channel: held-out NRMSE and χ²/dof of the posterior mean (and the reference), share of
+    the recording inside the 90 % predictive band (fitted / held out)."""
+    val = summary.get("validation", {})
+    mean = val.get("posterior_mean", {}).get("channels", {})
+    point = val.get("refined", {}).get("channels", {})
+    ref = val.get("reference", {}).get("channels", {})
+    ppc = summary.get("ppc", {})
+    inside = ppc.get("fraction_inside_90pct_band", {})
+    held = ppc.get("fraction_inside_90pct_band_held_out", {})
+    pct = lambda v: "–" if v is None else f"{v:.0%}"
+    rows = []
+    for c in summary["channels"]:
+        m = mean.get(c, {})
+        row = [c, fmt(m.get("nrmse")), fmt(m.get("chi2_dof"))]
+        if point:
+            row += [fmt(point.get(c, {}).get("nrmse")), fmt(point.get(c, {}).get("chi2_dof"))]
+        if ref:
+            row += [fmt(ref.get(c, {}).get("nrmse")), fmt(ref.get(c, {}).get("chi2_dof"))]
+        rows.append([*row, pct(inside.get(c)), pct(held.get(c))])
+    return rows
+
+
+def validation_header(summary: Mapping[str, Any]) -> list[str]:
+    val = summary.get("validation", {})
+    head = ["channel", "held-out NRMSE", "held-out χ²/dof"]
+    head += ["refined NRMSE", "refined χ²/dof"] if "refined" in val else []
+    head += ["reference NRMSE", "reference χ²/dof"] if "reference" in val else []
+    return [*head, "inside 90 % band (fitted)", "inside 90 % band (held out)"]
+
+
+def identify_page(summary: Mapping[str, Any], folder: str | os.PathLike, also: Sequence[Path] = ()) -> str:
+    """The page of an identify folder (pictures read from `folder`)."""
+    folder = Path(folder)
+    effects = ", ".join(summary.get("effects") or []) or "none"
+    refined = summary.get("refined", {}).get("values")
+    return H.page(
+        f"vdsbi identify: {summary['recording']}",
+        [
+            H.paragraph(
+                f"Effects in θ: {effects}; {summary['problem'].get('how', '')}; channels "
+                f"{', '.join(summary['channels'])}."
+            ),
+            warnings_block(summary),
+            H.heading("Posterior"),
+            H.table(
+                PARAM_HEADER + (["refined (least squares)"] if refined else []),
+                parameter_rows(summary["parameters"], refined),
+            ),
+            H.figure(folder / "pairplot.png", "Posterior pair plot over the prior box."),
+            H.heading("Fit to the recording"),
+            H.table(validation_header(summary), validation_rows(summary)),
+            H.figure(
+                folder / "ppc.png",
+                "Recording over the posterior-predictive median and 90 % band; grey: held out.",
+            ),
+            H.links(folder, IDENTIFY_FILES, also),
+        ],
+    )
+
+
+def diagnose_page(rep: Mapping[str, Any], folder: str | os.PathLike) -> str:
+    """The page of a diagnose folder."""
+    folder = Path(folder)
+    det = "detected" if rep["mismatch_detected"] else "not detected"
+    loc = rep["located"]
+    cand = [
+        [e["name"], f"{e['score']:.1f}", f"{e['probability']:.3f}", _effect_values(e)]
+        for e in rep["effects"][:8]
+    ]
+    fit = [
+        [c, fmt(b["nrmse"]), fmt(rep["fit"]["after"][c]["nrmse"])]
+        + [fmt(b["chi2_dof"]), fmt(rep["fit"]["after"][c]["chi2_dof"])]
+        for c, b in rep["fit"]["before"].items()
+    ]
+    theta = [
+        [
+            k,
+            display_unit(PARAM_UNITS[k])[1],
+            fmt(v, PARAM_UNITS[k]),
+            fmt(rep["theta"]["after"][k], PARAM_UNITS[k]),
+        ]
+        for k, v in rep["theta"]["before"].items()
+    ]
+    return H.page(
+        f"vdsbi diagnose: {rep['source']}",
+        [
+            H.paragraph(f"Verdict: {rep['verdict']}.", "ok" if rep.get("explained") else "warn"),
+            H.paragraph(
+                f"Misspecification {det} (p = {rep['p_value']:.3g}, α = {rep['alpha']:g}); after the "
+                f"fix p = {rep['p_value_after']:.3g}. Located on channels "
+                f"{', '.join(loc['channels']) or '–'}; bands (Hz) "
+                f"{', '.join(f'{a:g}–{b:g}' for a, b in loc['bands_hz']) or '–'}."
+            ),
+            H.heading("Next"),
+            H.paragraph("The posterior with what was named modelled:"),
+            H.code(rep.get("identify_command", "")),
+            H.heading("Candidates (log Bayes factor vs none)"),
+            H.table(["candidate", "score", "probability", "parameters"], cand),
+            H.heading("Held-out fit, before → after"),
+            H.table(["channel", "NRMSE before", "NRMSE after", "χ²/dof before", "χ²/dof after"], fit),
+            H.figure(folder / "overlay.png", "Measured vs base model (before) and with the fix (after)."),
+            H.figure(folder / "residual_heatmap.png", "Base-model residual by channel and time."),
+            H.figure(folder / "residual_spectra.png", "Residual spectra before and after the fix."),
+            H.heading("θ (MAP), before → after"),
+            H.table(["θ", "unit", "before", "after"], theta),
+            H.links(folder, DIAGNOSE_FILES),
+        ],
+    )
+
+
+def _effect_values(e: Mapping[str, Any]) -> str:
+    return "; ".join(
+        f"{eff}.{k} = {v:.3g} ± {e['params_std'][eff][k]:.2g}"
+        for eff, d in e["params"].items()
+        for k, v in d.items()
+    )
+
+
+def demo_page(
+    truth: Mapping[str, float],
+    runs: Sequence[tuple[str, str, Mapping[str, Any]]],
+    diagnosis: Mapping[str, Any] | None,
+    folder: str | os.PathLike,
+    concealed: str,
+) -> str:
+    """The demo's before/after page.
+
+    Args:
+        truth: true values by parameter name (θ and the concealed effect's parameters).
+        runs: (label, subfolder, posterior.json summary) of each identification, in order.
+        diagnosis: the diagnosis report (None: not run).
+        concealed: what the drive hid, in words.
+    """
+    folder = Path(folder)
+    labels = [label for label, _, _ in runs]
+    held = [
+        [c, *(fmt(summ["validation"]["posterior_mean"]["channels"][c]["chi2_dof"]) for _, _, summ in runs)]
+        for c in runs[0][2]["channels"]
+    ]
+    subpages = [f"{sub}/report.html" for _, sub, _ in runs] + (["diagnose/report.html"] if diagnosis else [])
+    return H.page(
+        f"vdsbi demo: a concealed {concealed}, found and modelled",
+        [
+            *_demo_steps(runs, diagnosis, concealed),
+            H.heading("Parameters: truth, before and after"),
+            H.table(
+                ["parameter", "unit", "truth"] + [f"{label}: mean [90 %]" for label in labels],
+                _truth_rows(truth, runs),
+            ),
+            H.heading("Held-out driving: χ²/dof of each posterior mean (1 is the noise level)"),
+            H.table(["channel", *labels], held),
+            H.figure(
+                folder / "before_after.png",
+                "Posterior marginals over the prior box (black: truth) and the "
+                "held-out recording against each posterior's 90 % predictive band.",
+            ),
+            *(
+                H.figure(folder / f"pairplot_{k}.png", f"Pair plot, {label} (red: truth).")
+                for k, label in enumerate(labels)
+            ),
+            H.links(folder, [*subpages, "truth.json", "recording.csv", "vehicle.json"]),
+        ],
+    )
+
+
+def _demo_steps(runs, diagnosis, concealed: str) -> list[str]:
+    """The story, one coloured paragraph a step: flagged or not, what diagnose named."""
+    steps = [
+        H.paragraph(f"1. Simulated a drive of the built-in car with a concealed {concealed} (truth.json).")
+    ]
+    for k, (label, sub, summ) in enumerate(runs):
+        flagged = summ.get("warnings")
+        note = "flagged: " + " ".join(w["message"] for w in flagged) if flagged else "no warning"
+        step = 2 if k == 0 else 4
+        steps.append(
+            H.paragraph(
+                f"{step}. identify, {label} ({sub}/report.html): {note}.", "warn" if flagged else "ok"
+            )
+        )
+        if k == 0 and diagnosis is not None:
+            steps.append(
+                H.paragraph(
+                    f"3. diagnose (diagnose/report.html): {diagnosis['verdict']}; named: "
+                    f"{', '.join(diagnosis['chosen']) or 'none'}; "
+                    f"next: {diagnosis.get('identify_command', '')}",
+                    "ok" if diagnosis.get("explained") else "warn",
+                )
+            )
+    return steps
+
+
+def _truth_rows(truth: Mapping[str, float], runs) -> list[list[str]]:
+    """Per parameter of the last run: unit, truth, and each run's mean [90 %] (✓/✗ truth inside)."""
+    rows = []
+    for n, last in runs[-1][2]["parameters"].items():
+        unit = last["unit"]
+        row = [n, display_unit(unit)[1], fmt(truth.get(n), unit)]
+        for _, _, summ in runs:
+            p = summ["parameters"].get(n)
+            row.append("not in the model" if p is None else _with_interval(p, truth.get(n)))
+        rows.append(row)
+    return rows
+
+
+def _with_interval(p: Mapping[str, Any], truth: float | None) -> str:
+    """'mean [q05, q95]' (✓ when the truth lies inside, ✗ when not)."""
+    if p.get("identified") is False:
+        return "not identified"
+    u = p["unit"]
+    mark = "" if truth is None else (" ✓" if p["q05"] <= truth <= p["q95"] else " ✗")
+    return f"{fmt(p['mean'], u)} [{fmt(p['q05'], u)}, {fmt(p['q95'], u)}]{mark}"
