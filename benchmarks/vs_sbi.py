@@ -152,7 +152,12 @@ def main():
 def _save(path, cells):
     os.makedirs(os.path.dirname(path), exist_ok=True)
     d = jax.devices()[0]
-    out = {"cells": cells, "device": f"{d.platform}:{d.device_kind}", "protocol": __doc__}
+    out = {
+        "cells": cells,
+        "device": f"{d.platform}:{d.device_kind}",
+        "num_devices": jax.device_count(),
+        "protocol": __doc__,
+    }
     with open(path + ".tmp", "w") as f:
         json.dump(out, f, indent=1)
     os.replace(path + ".tmp", path)
