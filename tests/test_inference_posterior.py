@@ -85,7 +85,8 @@ def test_data_parallel_step_on_four_devices():
         opt = make_optimizer(1e-3, 0.0, 5.0)
         batch = (theta, x, np.ones(64, bool))
         res = []
-        for mesh in (data_mesh(), data_mesh(jax.devices()[:1])):
+        assert data_mesh().devices.size == 1  # CPU default: no batch sharding
+        for mesh in (data_mesh(jax.devices()), data_mesh(jax.devices()[:1])):
             f = replicate(flow, mesh)
             s = replicate(init_opt_state(f, opt), mesh)
             b = shard_batch(batch, mesh)

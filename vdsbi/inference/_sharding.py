@@ -7,8 +7,16 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
 
 def data_mesh(devices=None) -> Mesh:
-    """1-D mesh named ``"batch"`` over ``devices`` (default: all of ``jax.devices()``)."""
-    devices = jax.devices() if devices is None else devices
+    """1-D mesh named ``"batch"`` over ``devices``.
+
+    Default: all of ``jax.devices()`` on an accelerator, the first device only on a CPU. CPU
+    "devices" share one machine's cores, and sharding a small flow's batch over them costs more
+    in cross-device reductions than it gains (two_moons, batch 128: 396 maximum-likelihood
+    steps/s on one CPU device, 112 on two); the simulator still uses every CPU device.
+    """
+    if devices is None:
+        devices = jax.devices()
+        devices = devices[:1] if devices[0].platform == "cpu" else devices
     return Mesh(np.asarray(devices), ("batch",))
 
 

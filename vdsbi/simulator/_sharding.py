@@ -1,6 +1,19 @@
-"""Draws along a leading batch axis, split evenly over all JAX devices."""
+"""Draws along a leading batch axis, split evenly over all JAX devices.
+
+On a CPU, JAX gives one device by default and XLA runs a vmapped simulation on one core, so a
+batch of draws would leave the other cores idle. When this module is imported before JAX has
+started its backends, it therefore asks JAX for one CPU device per core (at most
+``MAX_CPU_DEVICES``) through JAX's own option ``jax_num_cpu_devices``; batches are then
+split over them. This is the only process-wide setting vdsbi makes. It is skipped if the user
+already chose (``jax_num_cpu_devices`` set, or ``--xla_force_host_platform_device_count`` in
+``XLA_FLAGS``), if JAX already ran something (then it cannot change), and it can be turned off
+or sized with the environment variable ``VDSBI_CPU_DEVICES`` (``1`` = JAX's default of one
+device, ``N`` = N devices, unset/``auto`` = one per core). GPU devices are not affected.
+"""
 
 from __future__ import annotations
+
+import os
 
 import jax
 import jax.numpy as jnp
@@ -23,3 +36,43 @@ def shard_draws(tree, n: int):
         return tree
     mesh = Mesh(np.array(jax.devices()), ("batch",))
     return jax.device_put(tree, NamedSharding(mesh, PartitionSpec("batch")))
+
+
+MAX_CPU_DEVICES = 8
+ENV_CPU_DEVICES = "VDSBI_CPU_DEVICES"
+
+
+def cpu_devices_wanted(env: dict | None = None) -> int:
+    """CPU devices vdsbi asks JAX for: from ``VDSBI_CPU_DEVICES``, else one per usable core."""
+    env = os.environ if env is None else env
+    raw = env.get(ENV_CPU_DEVICES, "auto").strip().lower()
+    if raw in ("", "auto"):
+        return max(1, min(len(os.sched_getaffinity(0)), MAX_CPU_DEVICES))
+    try:
+        n = int(raw)
+    except ValueError:
+        raise ValueError(f"{ENV_CPU_DEVICES} must be 'auto' or a positive integer, got {raw!r}") from None
+    if n < 1:
+        raise ValueError(f"{ENV_CPU_DEVICES} must be 'auto' or a positive integer, got {raw!r}")
+    return n
+
+
+def use_cpu_cores() -> bool:
+    """Ask JAX for ``cpu_devices_wanted()`` CPU devices if nobody chose and JAX has not started.
+
+    Returns whether the setting was made (called once when vdsbi is imported).
+    """
+    n = cpu_devices_wanted()
+    user_chose = jax.config.jax_num_cpu_devices != -1 or "xla_force_host_platform_device_count" in (
+        os.environ.get("XLA_FLAGS", "")
+    )
+    if n <= 1 or user_chose:
+        return False
+    try:
+        jax.config.update("jax_num_cpu_devices", n)
+    except RuntimeError:  # backends already initialised by the caller: leave them as they are
+        return False
+    return True
+
+
+use_cpu_cores()
