@@ -26,7 +26,7 @@ from vdsbi.simulator import (
 NOISE = {"ax": 0.05, "ay": 0.05, "yaw_rate": 0.005, "omega_front": 0.1, "omega_rear": 0.1, "vx": 0.05}
 BIAS = {"ax": 0.3, "ay": -0.25, "yaw_rate": 0.0}
 #: Enough to learn the ax bias.
-WITH_EFFECT = ["--rounds", "2", "--sims", "200", "--epochs", "30", "--samples", "500", "--quiet"]
+WITH_EFFECT = "--rounds 2 --sims 200 --epochs 30 --samples 500 --no-refine --quiet".split()
 
 
 @pytest.fixture(scope="module")

@@ -33,6 +33,7 @@ class DemoBudget:
         duration: the drive, s.
         rounds, sims, epochs: APT budget of each identification (epochs None: the default).
         diagnose: options of the diagnosis (`vdsbi.discovery.DiagnoseSettings` fields).
+        identify: further options of both identifications (`identify`'s keywords).
     """
 
     duration: float = 20.0
@@ -40,6 +41,7 @@ class DemoBudget:
     sims: int = 1000
     epochs: int | None = None
     diagnose: dict = dataclasses.field(default_factory=dict)
+    identify: dict = dataclasses.field(default_factory=dict)
 
 
 #: --quick: a 10 s drive, 2 x 300 simulations, no diagnosis plots.
@@ -153,7 +155,7 @@ def demo(
         truth = demo_recording(d, duration=b.duration, seed=seed)
         rec, veh = _drive(d, name)
         say(f"2/5 identify with the base model: {b.rounds} rounds x {b.sims} simulations")
-        base = run(rec, veh, d, name, "identify", ())
+        base = run(rec, veh, d, name, "identify", (), refine=False)  # flagged: no point to refine
         runs, diagnosis, report = [("base model", "identify", base)], "skipped (--no-diagnose)", None
         if run_diagnosis:
             say("3/5 diagnose: looking for missing physics")
@@ -189,7 +191,7 @@ def _names(name: Path, folder: str) -> tuple[Path, Path, Path]:
     return name / "recording.csv", name / "vehicle.json", name / folder
 
 
-def _identify(rec, veh, d: Path, name: Path, folder: str, effects, *, budget, seed, progress, say):
+def _identify(rec, veh, d: Path, name: Path, folder: str, effects, *, budget, seed, progress, say, **kw):
     """One identification of the demo drive into d/folder, its table in table.txt."""
     res = identify(
         rec,
@@ -204,6 +206,7 @@ def _identify(rec, veh, d: Path, name: Path, folder: str, effects, *, budget, se
         progress=progress,
         log=say,
         names=_names(name, folder),
+        **(kw | budget.identify),
     )
     (d / folder / "table.txt").write_text(res.table() + "\n")
     say(res.table())

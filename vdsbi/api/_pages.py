@@ -192,10 +192,7 @@ def demo_page(
     """
     folder = Path(folder)
     labels = [label for label, _, _ in runs]
-    held = [
-        [c, *(fmt(summ["validation"]["posterior_mean"]["channels"][c]["chi2_dof"]) for _, _, summ in runs)]
-        for c in runs[0][2]["channels"]
-    ]
+    held = [[c, *(_held_chi2(summ, c) for _, _, summ in runs)] for c in runs[0][2]["channels"]]
     subpages = [f"{sub}/report.html" for _, sub, _ in runs] + (["diagnose/report.html"] if diagnosis else [])
     return H.page(
         f"vdsbi demo: a concealed {concealed}, found and modelled",
@@ -206,7 +203,7 @@ def demo_page(
                 ["parameter", "unit", "truth"] + [f"{label}: mean [90 %]" for label in labels],
                 _truth_rows(truth, runs),
             ),
-            H.heading("Held-out driving: χ²/dof of each posterior mean (1 is the noise level)"),
+            H.heading("Held-out driving: χ²/dof of each posterior mean / refined point (1: the noise level)"),
             H.table(["channel", *labels], held),
             H.figure(
                 folder / "before_after.png",
@@ -222,13 +219,23 @@ def demo_page(
     )
 
 
+def _held_chi2(summ: Mapping[str, Any], channel: str) -> str:
+    """'mean / refined' held-out χ²/dof of a channel ('–' where a point did not simulate)."""
+    val = summ.get("validation", {})
+    parts = [
+        val.get(k, {}).get("channels", {}).get(channel, {}).get("chi2_dof")
+        for k in ("posterior_mean", "refined")
+    ]
+    return " / ".join(fmt(v) for v in parts if v is not None or "refined" in val) or "–"
+
+
 def _demo_steps(runs, diagnosis, concealed: str) -> list[str]:
     """The story, one coloured paragraph a step: flagged or not, what diagnose named."""
     steps = [
         H.paragraph(f"1. Simulated a drive of the built-in car with a concealed {concealed} (truth.json).")
     ]
     for k, (label, sub, summ) in enumerate(runs):
-        flagged = summ.get("warnings")
+        flagged = [w for w in summ.get("warnings", ()) if w.get("kind") != "recording"]
         note = "flagged: " + " ".join(w["message"] for w in flagged) if flagged else "no warning"
         step = 2 if k == 0 else 4
         steps.append(
