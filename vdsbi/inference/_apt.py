@@ -257,7 +257,9 @@ def apt(
     Returns:
         ``(posterior at x_o, final state)``.
     """
-    x_o = jnp.asarray(x_o)
+    # Through the host: an observation simulated under sharding lives on several devices,
+    # and the flow's parameters on one.
+    x_o = jnp.asarray(np.asarray(x_o))
     sims = _sims_schedule(sims_per_round, rounds)
     mesh = data_mesh() if mesh is None else mesh
     problem = _Problem(simulate, prior, x_o, embedding, config, truncate, on_epoch_end, mesh)
