@@ -1,5 +1,5 @@
-"""vdsbi asks JAX for one CPU device per core at import, only when nobody chose and JAX has not
-started; VDSBI_CPU_DEVICES sizes or turns it off. Each case runs in a fresh interpreter."""
+"""VDSBI_CPU_DEVICES (off by default) asks JAX for CPU devices at import, only when nobody chose
+and JAX has not started. Each case runs in a fresh interpreter."""
 
 import os
 import subprocess
@@ -24,8 +24,9 @@ def _devices(before="", **env):
     return int(proc.stdout.split()[-1])
 
 
-def test_default_is_one_device_per_core_up_to_eight():
-    assert _devices() == max(1, min(len(os.sched_getaffinity(0)), 8))
+def test_default_is_jaxs_one_device_and_auto_is_one_per_core():
+    assert _devices() == 1
+    assert _devices(VDSBI_CPU_DEVICES="auto") == max(1, min(len(os.sched_getaffinity(0)), 8))
 
 
 def test_environment_variable_sizes_or_turns_it_off():
@@ -34,9 +35,9 @@ def test_environment_variable_sizes_or_turns_it_off():
 
 
 def test_the_users_choice_and_a_started_jax_are_left_alone():
-    assert _devices(XLA_FLAGS="--xla_force_host_platform_device_count=3") == 3
-    assert _devices(before="jax.config.update('jax_num_cpu_devices', 1)") == 1
-    assert _devices(before="jax.numpy.zeros(1).block_until_ready()") == 1
+    assert _devices(XLA_FLAGS="--xla_force_host_platform_device_count=3", VDSBI_CPU_DEVICES="2") == 3
+    assert _devices(before="jax.config.update('jax_num_cpu_devices', 1)", VDSBI_CPU_DEVICES="2") == 1
+    assert _devices(before="jax.numpy.zeros(1).block_until_ready()", VDSBI_CPU_DEVICES="2") == 1
 
 
 def test_bad_value_is_a_clear_error():
