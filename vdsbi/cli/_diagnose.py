@@ -25,7 +25,18 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists")
     p.add_argument("--alpha", type=float, default=0.05, help="level of the misspecification test")
     p.add_argument("--seed", type=int, default=0, help="seed of the test's simulated null")
-    p.add_argument("--top-pairs", type=int, default=3, help="fit pairs among this many best singles")
+    p.add_argument(
+        "--top-pairs", type=int, default=3, help="0: consider single effects only (kept for old scripts)"
+    )
+    p.add_argument(
+        "--max-effects", type=int, default=3, help="most effects the forward search adds (default 3)"
+    )
+    p.add_argument(
+        "--max-terms",
+        type=int,
+        default=3,
+        help="most candidate terms written for what the library leaves (default 3; 0: none)",
+    )
     p.add_argument("--effects", default=None, help="comma-separated effects to consider (default all)")
     p.add_argument(
         "--max-windows", type=int, default=None, help="most windows fitted (default: the whole drive)"
@@ -59,6 +70,8 @@ def run(args) -> int:
             seed=args.seed,
             alpha=args.alpha,
             top_pairs=args.top_pairs,
+            max_effects=args.max_effects,
+            max_terms=args.max_terms,
             candidates=candidates,
             max_windows=args.max_windows,
             longitudinal=args.longitudinal,
