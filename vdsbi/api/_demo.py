@@ -32,6 +32,8 @@ class DemoBudget:
     Attributes:
         duration: the drive, s.
         rounds, sims, epochs: APT budget of each identification (epochs None: the default).
+        base_rounds: rounds of the base-model identification (its job is to be flagged, and
+            one round is enough for that).
         diagnose: options of the diagnosis (`vdsbi.discovery.DiagnoseSettings` fields).
         identify: further options of both identifications (`identify`'s keywords).
     """
@@ -40,11 +42,12 @@ class DemoBudget:
     rounds: int = 2
     sims: int = 1000
     epochs: int | None = None
+    base_rounds: int = 1
     diagnose: dict = dataclasses.field(default_factory=dict)
     identify: dict = dataclasses.field(default_factory=dict)
 
 
-#: --quick: a 10 s drive, 2 x 300 simulations, no diagnosis plots.
+#: --quick: a 10 s drive, 2 x 300 simulations (base model 1 x 300), no diagnosis plots.
 QUICK = DemoBudget(duration=10.0, sims=300, diagnose={"plots": False})
 
 
@@ -154,8 +157,9 @@ def demo(
         say(f"1/5 simulating a {b.duration:g} s drive of the built-in vehicle with a concealed effect")
         truth = demo_recording(d, duration=b.duration, seed=seed)
         rec, veh = _drive(d, name)
-        say(f"2/5 identify with the base model: {b.rounds} rounds x {b.sims} simulations")
-        base = run(rec, veh, d, name, "identify", (), refine=False)  # flagged: no point to refine
+        say(f"2/5 identify with the base model: {b.base_rounds} round(s) x {b.sims} simulations")
+        # Flagged anyway: no point refining it or spending more rounds on it.
+        base = run(rec, veh, d, name, "identify", (), refine=False, rounds=b.base_rounds)
         runs, diagnosis, report = [("base model", "identify", base)], "skipped (--no-diagnose)", None
         if run_diagnosis:
             say("3/5 diagnose: looking for missing physics")
@@ -193,12 +197,10 @@ def _names(name: Path, folder: str) -> tuple[Path, Path, Path]:
 
 def _identify(rec, veh, d: Path, name: Path, folder: str, effects, *, budget, seed, progress, say, **kw):
     """One identification of the demo drive into d/folder, its table in table.txt."""
+    apt = {"rounds": budget.rounds, "sims": budget.sims, "epochs": budget.epochs}
     res = identify(
         rec,
         veh,
-        rounds=budget.rounds,
-        sims=budget.sims,
-        epochs=budget.epochs,
         embedding="stats",
         seed=seed,
         effects=list(effects),
@@ -206,7 +208,7 @@ def _identify(rec, veh, d: Path, name: Path, folder: str, effects, *, budget, se
         progress=progress,
         log=say,
         names=_names(name, folder),
-        **(kw | budget.identify),
+        **(apt | kw | budget.identify),
     )
     (d / folder / "table.txt").write_text(res.table() + "\n")
     say(res.table())
