@@ -89,10 +89,11 @@ def _refine(problem, start, prior_box, effects, free, reweights, max_steps, solv
     hi = np.array([prior_box[n][1] for n in names])
     mask = np.asarray(train.train)
     scale = np.array([np.std(train.y[..., c][mask]) for c in range(len(train.channels))])
-    start = _best_start(train, np.atleast_2d(np.asarray(start, float)), effects, scale, solver)
+    wm = windowed_model(train, effects, solver)
+    start = _best_start(wm, train, np.atleast_2d(np.asarray(start, float)), effects, scale)
     z0 = jnp.asarray(logit((start - lo) / (hi - lo), eps=1e-4))
     idx = jnp.asarray([names.index(n) for n in free], dtype=int)
-    fit = _fitter(train, effects, solver, lo, hi, z0, idx, max_steps)
+    fit = _fitter(wm, train, effects, lo, hi, z0, idx, max_steps)
     z, steps, converged = z0[idx], [], False
     for _ in range(reweights + 1):
         res = fit(z, jnp.asarray(scale))
@@ -111,13 +112,12 @@ def _refine(problem, start, prior_box, effects, free, reweights, max_steps, solv
     )
 
 
-def _best_start(train: Problem, starts: np.ndarray, effects, scale: np.ndarray, solver) -> np.ndarray:
+def _best_start(wm, train: Problem, starts: np.ndarray, effects, scale: np.ndarray) -> np.ndarray:
     """The candidate with the least scaled squared misfit on the training samples (a failed
     simulation counts as infinitely bad)."""
     if len(starts) == 1:
         return starts[0]
     theta, effect_params = split_parameters(jnp.asarray(starts), effects)
-    wm = windowed_model(train, effects, solver)
     pred, ok = simulate_draws(None, wm, theta, effect_params=effect_params)
     err = np.where(np.asarray(train.train)[..., None], (np.asarray(pred) - train.y) / scale, 0.0)
     cost = np.where(np.asarray(ok), np.sum(err**2, axis=(1, 2, 3)), np.inf)
@@ -128,9 +128,8 @@ def _to_theta(z, lo, hi):
     return lo + (hi - lo) * jax.nn.sigmoid(z)
 
 
-def _fitter(train: Problem, effects, solver, lo, hi, z0, idx, max_steps):
+def _fitter(wm, train: Problem, effects, lo, hi, z0, idx, max_steps):
     """The jitted fit of the free coordinates for given channel scales (compiled once)."""
-    wm = windowed_model(train, effects, solver)
     y, mask = jnp.asarray(train.y), jnp.asarray(train.train)
     prec = jnp.full(idx.shape, 1.0 / PRIOR_STD**2)
 

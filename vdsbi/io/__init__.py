@@ -29,6 +29,7 @@ from ._segments import (
     Segment as Segment,
     estimate_noise_std as estimate_noise_std,
     find_segments as find_segments,
+    label_runs as label_runs,
     usable_segments as usable_segments,
 )
 from ._vehicle_file import read_vehicle as read_vehicle

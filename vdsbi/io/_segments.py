@@ -32,7 +32,7 @@ def _rolling(x: np.ndarray, n: int, how: str) -> np.ndarray:
     return getattr(r, how)().to_numpy()
 
 
-def _runs(labels: np.ndarray) -> list[tuple[int, int]]:
+def label_runs(labels: np.ndarray) -> list[tuple[int, int]]:
     """[start, stop) index ranges of equal consecutive labels."""
     edges = np.flatnonzero(labels[1:] != labels[:-1]) + 1
     starts = np.r_[0, edges]
@@ -81,7 +81,7 @@ def find_segments(
     if rec.has_torques:
         excited |= _rolling(rec.torque_front + rec.torque_rear, n_win, "std") >= min_torque_std
     n_quiet = int(round(max_quiet * rec.rate))
-    runs = _runs(excited)
+    runs = label_runs(excited)
     for k, (i0, i1) in enumerate(runs):
         if not excited[i0] and 0 < k < len(runs) - 1 and i1 - i0 <= n_quiet:
             excited[i0:i1] = True
@@ -89,7 +89,7 @@ def find_segments(
     steady = "steady steer and torque" if rec.has_torques else "steady steer"
     reasons = {1: f"speed below {min_speed:g} m/s", 2: f"no excitation ({steady})"}
     out: list[Segment] = []
-    for i0, i1 in _runs(label):
+    for i0, i1 in label_runs(label):
         a, b = float(t[i0]), float(t[i1 - 1])
         code = int(label[i0])
         if code:

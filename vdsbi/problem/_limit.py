@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..io import Recording
+from ..io import Recording, label_runs
+from ..simulator import GRAVITY
 from ._measured import running_mean
 
 #: Steer and yaw rate are smoothed over this long, s (vibration, sensor noise).
@@ -25,11 +26,6 @@ MIN_DEMAND = 0.3
 MIN_DURATION = 0.2
 #: Margins taken out before (build-up) and after (recovery) a slide, s.
 BEFORE, AFTER = 1.0, 2.0
-
-
-def _runs(flag: np.ndarray) -> list[tuple[int, int]]:
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], flag.astype(int), [0]])))
-    return list(zip(edges[::2], edges[1::2]))
 
 
 def slides(rec: Recording, *, wheel_radius: float, friction: float) -> list[tuple[float, float, str]]:
@@ -55,9 +51,9 @@ def slides(rec: Recording, *, wheel_radius: float, friction: float) -> list[tupl
     else:
         return []
     demand = np.abs(speed * r)
-    flag = (steer * r < 0) & (np.abs(steer) >= MIN_STEER) & (demand >= MIN_DEMAND * friction * 9.81)
+    flag = (steer * r < 0) & (np.abs(steer) >= MIN_STEER) & (demand >= MIN_DEMAND * friction * GRAVITY)
     out = []
-    for i0, i1 in _runs(flag):
+    for i0, i1 in (r for r in label_runs(flag) if flag[r[0]]):
         if rec.t[i1 - 1] - rec.t[i0] < MIN_DURATION:
             continue
         peak = float(demand[i0:i1].max())
