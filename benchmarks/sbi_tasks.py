@@ -53,10 +53,12 @@ TASKS = ("two_moons", "slcp", "gaussian_mixture", "gaussian_linear_uniform")
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
-def config_for(budget: int) -> NPEConfig:
-    return NPEConfig(
+def config_for(budget: int, **overrides) -> NPEConfig:
+    """The benchmark's settings at ``budget`` (``overrides``: other `NPEConfig` fields)."""
+    base = NPEConfig(
         batch_size=128 if budget <= 10_000 else 512, learning_rate=5e-4, patience=20, max_epochs=500
     )
+    return dataclasses.replace(base, **overrides)
 
 
 class _Observations:
@@ -77,13 +79,19 @@ class _Observations:
         return c2st(key, self.task.reference_posterior_samples(i, num_samples), samples)
 
 
-def run_cell(task_name, method, budget, n_obs, num_samples, seed, source="sbibm"):
+def _rounds(state):
+    """Per round: epochs, best epoch, patience (epochs) and wall seconds."""
+    keys = ("epochs", "best_epoch", "patience", "train_s")
+    return [{k: h.get(k) for k in keys} for h in state.history]
+
+
+def run_cell(task_name, method, budget, n_obs, num_samples, seed, source="sbibm", overrides=None):
     task = get_task(task_name)
     obs = _Observations(task, source)
-    cfg = config_for(budget)
+    cfg = config_for(budget, **(overrides or {}))
     emb = IdentityEmbedding(task.dim_x)
     key = jax.random.fold_in(jax.random.key(seed), budget)
-    scores, times, invalid = [], [], 0
+    scores, times, invalid, rounds = [], [], 0, []
     if method == "npe":
         x1 = obs.x(1)
         t0 = time.perf_counter()
@@ -92,6 +100,7 @@ def run_cell(task_name, method, budget, n_obs, num_samples, seed, source="sbibm"
         )
         times.append(time.perf_counter() - t0)
         invalid += state.num_invalid
+        rounds.append(_rounds(state))
     for i in range(1, n_obs + 1):
         x_o = obs.x(i)
         if method == "apt":
@@ -108,6 +117,8 @@ def run_cell(task_name, method, budget, n_obs, num_samples, seed, source="sbibm"
             )
             times.append(time.perf_counter() - t0)
             invalid += state.num_invalid
+            rounds.append(_rounds(state))
+            print(f"  {task_name} apt {budget} obs {i}: {times[-1]:.1f} s", flush=True)
         samples = post.sample(jax.random.fold_in(key, 1000 + i), num_samples, x=x_o)
         scores.append(obs.score(jax.random.fold_in(key, 2000 + i), i, samples, num_samples))
         print(f"  {task_name} {method} {budget} obs {i}: c2st={scores[-1]:.3f}", flush=True)
@@ -122,6 +133,8 @@ def run_cell(task_name, method, budget, n_obs, num_samples, seed, source="sbibm"
         "c2st": [float(s) for s in scores],
         "num_invalid_simulations": int(invalid),
         "published": PUBLISHED[(task_name, method)][BUDGETS.index(budget)],
+        "config": dataclasses.asdict(cfg),
+        "rounds": rounds,
     }
 
 
@@ -156,8 +169,14 @@ def main():
     ap.add_argument("--observations", choices=["sbibm", "ours"], default="sbibm")
     ap.add_argument("--num-samples", type=int, default=10_000)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--patience-unit",
+        choices=["epochs", "new_data"],
+        help="NPEConfig.patience_unit (default: its default)",
+    )
     ap.add_argument("--out", default=os.path.join(HERE, "results", "sbi_tasks.json"))
     args = ap.parse_args()
+    overrides = {} if args.patience_unit is None else {"patience_unit": args.patience_unit}
     if args.quick:
         args.tasks, args.budgets, args.n_obs = ["two_moons"], [1_000], 2
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
@@ -169,7 +188,7 @@ def main():
         if (t, m, b) in done:
             continue
         print(f"cell {t} {m} {b}", flush=True)
-        cell = run_cell(t, m, b, args.n_obs, args.num_samples, args.seed, args.observations)
+        cell = run_cell(t, m, b, args.n_obs, args.num_samples, args.seed, args.observations, overrides)
         results = _save(args.out, cell, args.observations)
         print(table(results), flush=True)
 

@@ -215,3 +215,31 @@ def test_npe_on_given_simulations_learns_and_checks_shapes(getkey):
     assert info["best_val_loss"] < info["val_losses"][0]
     with pytest.raises(ValueError, match="need theta"):
         npe(getkey(), prior, theta[:, :1], x, embedding=IdentityEmbedding(2), config=TINY)
+
+
+@pytest.mark.parametrize("unit", ["new_data", "epochs"])
+def test_later_rounds_wait_for_their_new_data_only(unit, getkey):
+    # "new_data": round r of equal rounds waits ceil(p / (r + 1)) epochs (at least 2);
+    # "epochs": p epochs in every round. Either way a round stops exactly `patience` epochs
+    # after its best one, unless it ran out of epochs.
+    prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
+    cfg = dataclasses.replace(TINY, max_epochs=40, patience=6, patience_unit=unit)
+    _, state = apt(
+        getkey(),
+        _gauss_sim,
+        prior,
+        jnp.zeros(2),
+        embedding=IdentityEmbedding(2),
+        rounds=4,
+        sims_per_round=160,
+        config=cfg,
+    )
+    expected = [6, 3, 2, 2] if unit == "new_data" else [6, 6, 6, 6]
+    assert [h["patience"] for h in state.history] == expected
+    for h in state.history:
+        assert h["epochs"] == 40 or h["epochs"] - 1 - h["best_epoch"] == h["patience"]
+
+
+def test_patience_unit_is_checked():
+    with pytest.raises(ValueError, match="patience_unit"):
+        NPEConfig(patience_unit="steps")
