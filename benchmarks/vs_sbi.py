@@ -14,7 +14,7 @@ posterior samples with sbibm's C2ST (scikit-learn MLP, 5-fold). ``*_train_s`` is
 wall time (ours includes JIT compilation); sampling and C2ST are not timed.
 
 Writes ``benchmarks/results/vs_sbi.json`` after every cell (finished cells are skipped on a
-re-run) and prints the table.
+re-run), and the table to ``benchmarks/results/vs_sbi.md``.
 """
 
 import argparse
@@ -52,7 +52,9 @@ def train_sbi(task, theta, x, seed):
     from sbi.utils import BoxUniform
 
     torch.manual_seed(seed)
-    prior = BoxUniform(torch.as_tensor(np.asarray(task.prior.low)), torch.as_tensor(np.asarray(task.prior.high)))
+    prior = BoxUniform(
+        torch.as_tensor(np.asarray(task.prior.low)), torch.as_tensor(np.asarray(task.prior.high))
+    )
     inference = NPE(prior=prior, density_estimator="nsf", show_progress_bars=False)
     t0 = time.perf_counter()
     inference.append_simulations(torch.as_tensor(theta), torch.as_tensor(x)).train()
@@ -70,7 +72,9 @@ def train_sbi(task, theta, x, seed):
 def train_ours(task, theta, x, budget, seed):
     key = jax.random.key(seed)
     t0 = time.perf_counter()
-    flow, info = npe(key, task.prior, theta, x, embedding=IdentityEmbedding(task.dim_x), config=config_for(budget))
+    flow, info = npe(
+        key, task.prior, theta, x, embedding=IdentityEmbedding(task.dim_x), config=config_for(budget)
+    )
     jax.block_until_ready(flow)
     train_s = time.perf_counter() - t0
 
@@ -161,6 +165,12 @@ def _save(path, cells):
     with open(path + ".tmp", "w") as f:
         json.dump(out, f, indent=1)
     os.replace(path + ".tmp", path)
+    n_obs = "/".join(str(n) for n in sorted({c["n_obs"] for c in cells}))
+    with open(os.path.splitext(path)[0] + ".md", "w") as f:
+        f.write(
+            f"# ours vs sbi (NPE, NSF): C2ST mean over sbibm observations 1..{n_obs}, training seconds\n\n"
+        )
+        f.write(f"device {out['device']} ×{out['num_devices']}\n\n" + table(cells) + "\n")
 
 
 if __name__ == "__main__":
