@@ -202,13 +202,16 @@ def score(truth: dict, rep: dict, seconds: float) -> dict:
             ev = np.array([est[k] for k in truth["params"][e]])
             mag[e] = float(np.linalg.norm(ev - tv) / np.linalg.norm(tv))
     before, after = rep["fit"]["before"], rep["fit"]["after"]
-    fixed = rep["fit"].get("after_terms", after)  # after the library fix and any discovered term
+    # after the library fix and the discovered terms, where the report claims them
+    claimed = rep.get("explanation") == "discovered term"
+    fixed = rep["fit"]["after_terms"] if claimed else after
     terms = [{"key": t["key"], "formula": t["formula"]} for t in rep.get("discovered_terms", [])]
     return {
         "outside": truth.get("outside"),
         "explanation": rep.get("explanation"),
         "terms": terms,
-        "right_physics": right_physics(truth, chosen, terms),
+        "right_physics": right_physics(truth, chosen, terms if claimed else []),
+        "terms_claimed": claimed,
         "ambiguous": rep.get("ambiguous", []),
         "search_steps": rep.get("search_steps"),
         "verdict": rep.get("verdict"),
@@ -449,7 +452,8 @@ def plan(args):
     if args.suite == "multi":
         return [(e, None) for e in MULTI], 20.0, {}, "concealed_effects_multi"
     if args.suite == "outside":
-        cases = [((), None)] * args.clean + [((), k) for k in outside_physics.KINDS]
+        kinds = [k for _ in range(args.repeats) for k in outside_physics.KINDS]
+        cases = [((), None)] * args.clean + [((), k) for k in kinds]
         return cases, 20.0, {}, "concealed_effects_outside"
     cases = case_list(args.per_effect, args.clean, args.pairs, args.seed, args.only)
     name = "concealed_effects" if not args.only else "concealed_effects_" + "_".join(args.only)
@@ -491,6 +495,7 @@ def main(argv=None) -> int:
     )
     ap.add_argument("--suite", choices=("library", "multi", "outside"), default="library")
     ap.add_argument("--only", nargs="+", default=None, help="library suite: only these effects")
+    ap.add_argument("--repeats", type=int, default=1, help="outside suite: recordings per kind")
     args = ap.parse_args(argv)
     jax.config.update("jax_compilation_cache_dir", str(Path(args.data).parent / "vdsbi_jax_cache"))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 2.0)

@@ -44,8 +44,16 @@ RIGHT = {
     "delay": ({"signal_delay"}, {"steer_rate", "yaw_rate_delay"}),
     "gyro_scale": ({"sensor_scale"}, {"yaw_rate_scale"}),
     "body_roll": ({"sensor_scale"}, {"ay_scale", "ay_quadratic"}),
-    "tyre_curve": ({"tyre_friction"}, {"side_quadratic", "side_cubic", "steer_cubed"}),
-    "load_sensitivity": (set(), {"side_quadratic", "side_cubic", "steer_cubed", "side_linear"}),
+    "tyre_curve": (
+        {"tyre_friction"},
+        {"side_quadratic", "side_cubic", "steer_cubed", "yaw_moment_quadratic", "yaw_moment_cubic"},
+    ),
+    # the load moved by braking/accelerating changes the axles' stiffness ratio: a yaw moment
+    # ∝ a_x·a_c, or the tyre nonlinearity in a_c
+    "load_sensitivity": (
+        set(),
+        {"yaw_moment_load_transfer", "side_quadratic", "side_cubic", "steer_cubed", "side_linear"},
+    ),
 }
 
 DELAY_S = 0.06

@@ -77,6 +77,9 @@ def test_verdict_claims_an_effect_only_when_it_accounts_for_the_mismatch(quick):
     assert weak["explained"] is False and "weakly" in weak["text"]
     assert verdict(True, ["road_bank"], 0.5, 0.05, False)["explained"] is False  # absorbing
     assert verdict(True, ["road_bank"], 0.5, 0.05, True)["explained"] is True
+    assert verdict(True, ["road_bank"], 0.5, 0.05, True, ("ay", 1.08))["explained"] is True
+    high = verdict(True, ["road_bank"], 0.5, 0.05, True, ("ay", 1.3))  # held-out not within noise
+    assert high["explained"] is False and "1.3 > 1.1 in ay" in high["text"]
 
 
 def test_fit_recovers_theta_noise_free(quick, x64):

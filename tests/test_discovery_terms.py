@@ -25,15 +25,30 @@ from vdsbi.simulator import (
 )
 
 NOISE = {"ax": 0.08, "ay": 0.08, "yaw_rate": 0.003, "omega_front": 0.08, "omega_rear": 0.08}
-CANDIDATES = ("side_quadratic", "side_linear", "ay_scale", "yaw_rate_scale", "drag_constant")
+CANDIDATES = (
+    "side_quadratic",
+    "side_linear",
+    "ay_scale",
+    "yaw_rate_scale",
+    "drag_constant",
+    "yaw_moment_linear",
+    "yaw_moment_load_transfer",
+    "yaw_damping",
+)
 TRUE_C = -0.05  # lateral force += −0.05·m·a_c·|a_c|: 1.25 m/s² less at a_c = 5 m/s²
+# (term, c, words of its formula): a missing force, and a missing yaw moment that couples
+# braking and cornering (what load-sensitive tyres under load transfer give)
+ADDED = [
+    ("side_quadratic", TRUE_C, ("lateral force", "a_c·|a_c|")),
+    ("yaw_moment_load_transfer", -0.08, ("yaw moment", "ax·a_c")),
+]
 
 
-def _recording(seed: int, c: float):
+def _recording(seed: int, c: float, key: str = "side_quadratic"):
     vehicle = dataclasses.replace(default_vehicle(), noise_std=NOISE)
     theta = jnp.array([SEED_TRUE_THETA[n] for n in PARAM_NAMES])
     inputs = random_profile(jax.random.key(seed), 12.0)
-    model = VehicleModel(vehicle=vehicle, effects=(term_effect(("side_quadratic",))(),))
+    model = VehicleModel(vehicle=vehicle, effects=(term_effect((key,))(),))
     ys, ok = solve(model, theta, inputs, jnp.asarray(18.0), (jnp.array([c]),), Solver(dt=0.005))
     assert ok
     rng = np.random.default_rng(seed)
@@ -44,8 +59,8 @@ def _recording(seed: int, c: float):
     return build_recording(cols, f"term {c}"), vehicle
 
 
-def _discover(seed, c):
-    rec, vehicle = _recording(seed, c)
+def _discover(seed, c, key="side_quadratic"):
+    rec, vehicle = _recording(seed, c, key)
     data = fit_data(make_problem(rec, vehicle), "train")
     fitter = Fitter(vehicle, data, dt=0.005, effects=effect_space(()))
     z0 = fitter.initial_z(np.array([SEED_TRUE_THETA[n] for n in PARAM_NAMES]))
@@ -53,14 +68,15 @@ def _discover(seed, c):
     return discover_terms(vehicle, data, base, fitter, (), max_terms=2, candidates=CANDIDATES), base
 
 
-def test_added_term_is_recovered_with_its_coefficient(x64):
-    found, base = _discover(1, TRUE_C)
-    assert [t["key"] for t in found.terms][:1] == ["side_quadratic"], found.screened
+@pytest.mark.parametrize("key,c,words", ADDED, ids=[a[0] for a in ADDED])
+def test_added_term_is_recovered_with_its_coefficient(x64, key, c, words):
+    found, base = _discover(1, c, key)
+    assert [t["key"] for t in found.terms][:1] == [key], found.screened
     t = found.terms[0]
-    assert t["coefficient"] == pytest.approx(TRUE_C, rel=0.15)
-    assert abs(t["coefficient"] - TRUE_C) < 4 * t["std"] + 0.02 * abs(TRUE_C)
+    assert t["coefficient"] == pytest.approx(c, rel=0.15)
+    assert abs(t["coefficient"] - c) < 4 * t["std"] + 0.02 * abs(c)
     assert found.fit.chi2 < base.chi2 and found.gain >= 3.0
-    assert "lateral force" in t["formula"] and "a_c·|a_c|" in t["formula"]
+    assert all(w in t["formula"] for w in words), t["formula"]
 
 
 def test_clean_recording_yields_no_term(x64):
@@ -107,7 +123,9 @@ def test_explanation_says_what_explained_the_mismatch():
     same = {"ay": {"chi2_dof": 1.299}, "yaw_rate": {"chi2_dof": 1.2}}
     term = [{"formula": "ay measured as ay + 0.05·ay (c in -)"}]
     assert terms_section(_found(0.3, 0.3, ()), held, None, 100, 0.05)["explanation"] == "none"
-    assert terms_section(_found(0.001, 0.2), held, None, 100, 0.05)["explanation"] == "library"
+    assert terms_section(_found(0.001, 0.2), better, None, 100, 0.05)["explanation"] == "library"
+    # the residual test passes but the held-out χ²/dof stays above 1.1: not claimed
+    assert terms_section(_found(0.001, 0.2), held, None, 100, 0.05)["explanation"] == "unexplained"
     out = terms_section(_found(0.001, 0.001, terms=term, p_terms=0.3), held, better, 100, 0.05)
     assert out["explanation"] == "discovered term" and out["held_out_gain"] == pytest.approx(25.0)
     assert "ay + 0.05·ay" in out["sentence"]

@@ -9,7 +9,7 @@ from ._candidates import (
     pair_candidates as pair_candidates,
     single_candidates as single_candidates,
 )
-from ._data import fit_data as fit_data
+from ._data import fit_data as fit_data, held_out_metrics as held_out_metrics
 from ._diagnose import (
     DiagnoseSettings as DiagnoseSettings,
     DiagnosisResult as DiagnosisResult,
@@ -18,6 +18,7 @@ from ._diagnose import (
 )
 from ._fit import FitData as FitData, FitResult as FitResult, Fitter as Fitter
 from ._rank import (
+    HELD_OUT_CLAIM as HELD_OUT_CLAIM,
     PAIR_LOG_PRIOR as PAIR_LOG_PRIOR,
     STRONG as STRONG,
     Ranked as Ranked,
@@ -27,6 +28,7 @@ from ._rank import (
     rank as rank,
     separability as separability,
     verdict as verdict,
+    worst_channel as worst_channel,
 )
 from ._report import REQUIRED_KEYS as REQUIRED_KEYS, write_report as write_report
 from ._search import ForwardSearch as ForwardSearch, Step as Step, forward_search as forward_search

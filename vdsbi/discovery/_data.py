@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..problem import Problem
+from ..simulator import CHANNELS
 from ._fit import FitData
 
 
@@ -45,4 +46,19 @@ def held_out_from(problem: Problem) -> list[float]:
     out = []
     for w in problem.windows:
         out.append(w.t0 if w.role == "held" else (w.split if w.split is not None else w.t1))
+    return out
+
+
+def held_out_metrics(pred: np.ndarray, windows: Problem) -> dict:
+    """Per channel on the held-out samples: NRMSE (RMS error / std of the measurement) and
+    χ²/dof (mean squared whitened error; no parameters were fitted on these samples)."""
+    out = {}
+    m = windows.held
+    for c, name in enumerate(windows.channels):
+        e = (pred[:, :, CHANNELS.index(name)] - windows.y[:, :, c])[m]
+        y = windows.y[:, :, c][m]
+        out[name] = {
+            "nrmse": float(np.sqrt(np.mean(e**2)) / (np.std(y) + 1e-12)),
+            "chi2_dof": float(np.mean((e / windows.sigma[c]) ** 2)),
+        }
     return out

@@ -24,9 +24,9 @@ from ..io import Recording, read_recording, read_vehicle
 from ..problem import Problem, ProblemSettings, longitudinal_mode, make_problem
 from ..simulator import PARAM_NAMES, Vehicle
 from ._candidates import effect_names, effect_space, label
-from ._data import compared_inputs, fit_data
+from ._data import compared_inputs, fit_data, held_out_metrics
 from ._fit import FitResult, Fitter
-from ._rank import STRONG, Ranked, choose, merge, rank, separability
+from ._rank import HELD_OUT_CLAIM, STRONG, Ranked, bic_score, choose, merge, rank, separability, worst_channel
 from ._report import build_report, write_report
 from ._search import Step, forward_search
 from ._terms import TermDiscovery, discover_terms
@@ -305,22 +305,24 @@ def _decide(search: _Search, fitter: Fitter, base: FitResult, detected: bool, s:
     return _Decision(ranked, chosen, final)
 
 
-def _describe_remainder(
-    vehicle, fitter: Fitter, windows: Problem, decision: _Decision, after: _Check, s, say
-):
-    """Candidate terms for what the chosen effects leave, when the residual after the fix is
-    still inconsistent with noise (`discover_terms`), and the residual test of their refit."""
-    if s.max_terms <= 0 or after.test.p_value >= s.alpha:
+def _describe_remainder(vehicle, fitter: Fitter, windows: Problem, base, decision, after, held_ok, s, say):
+    """Candidate terms for what the chosen effects leave (`discover_terms`), when a mismatch
+    was detected and the fix leaves the residual inconsistent with noise or the held-out
+    χ²/dof above `HELD_OUT_CLAIM`; and the residual test of their refit."""
+    if s.max_terms <= 0 or (after.test.p_value >= s.alpha and held_ok):
         return None, None
-    found = discover_terms(
-        vehicle,
-        fitter.data,
-        decision.final,
-        fitter,
-        decision.chosen,
-        max_terms=s.max_terms,
-        max_iter=s.final_iters,
+    terms = lambda fit, chosen: discover_terms(
+        vehicle, fitter.data, fit, fitter, chosen, max_terms=s.max_terms, max_iter=s.final_iters
     )
+    found = terms(decision.final, decision.chosen)
+    if decision.chosen:
+        # The chosen effects may stand in for what a term describes better: the terms on the
+        # base model alone, kept if their evidence beats the library fit (with its terms).
+        alone = terms(base, ())
+        rival = found.fit if found.fit is not None else decision.final
+        if alone.fit is not None and bic_score(alone.fit, rival) > 0:
+            gain = float(bic_score(alone.fit, decision.final))
+            found = dataclasses.replace(alone, gain=gain, dropped=list(decision.chosen))
     for t in found.terms:
         say(f"discovered term: {t['formula']}")
     if found.fit is None:
@@ -371,7 +373,13 @@ def diagnose(
         decision = _decide(search, fitter, base, detected, s, say)
         after = _check(decision.final, windows, s.seed + 1, s)
         predictions = _held_out_predictions(fitter, windows, base, decision)
-        terms, test_terms = _describe_remainder(vehicle, fitter, windows, decision, after, s, say)
+        held_ok = (
+            not detected
+            or worst_channel(held_out_metrics(predictions["after"], windows))[1] <= HELD_OUT_CLAIM
+        )
+        terms, test_terms = _describe_remainder(
+            vehicle, fitter, windows, base, decision, after, held_ok, s, say
+        )
         if terms is not None and terms.fit is not None:
             full = fit_data(windows, "valid", truncate=False)
             predictions["after_terms"] = terms.fitter.predict(terms.fit.z, terms.effects, full)

@@ -31,6 +31,9 @@ from ._fit import FitResult
 STRONG = 3.0
 #: Log prior odds of a pair of effects against a single effect or "none".
 PAIR_LOG_PRIOR = -STRONG
+#: Largest held-out χ²/dof, in every channel, at which the chosen effects are claimed as the
+#: explanation (the issue's rule; ~2 standard deviations of χ²/dof at 1000 held-out samples).
+HELD_OUT_CLAIM = 1.1
 
 
 @dataclasses.dataclass
@@ -89,12 +92,27 @@ def choose(ranked: Sequence[Ranked], detected: bool) -> tuple[str, ...]:
     return ranked[0].effects
 
 
-def verdict(detected: bool, chosen: Sequence[str], p_after: float, alpha: float, held_improved) -> dict:
+def worst_channel(held: dict) -> tuple[str, float]:
+    """The channel with the largest held-out χ²/dof, and that value."""
+    ch = max(held, key=lambda c: held[c]["chi2_dof"])
+    return ch, float(held[ch]["chi2_dof"])
+
+
+def verdict(
+    detected: bool,
+    chosen: Sequence[str],
+    p_after: float,
+    alpha: float,
+    held_improved,
+    held_worst: tuple[str, float] | None = None,
+) -> dict:
     """One-line conclusion, and whether the chosen effects account for the whole mismatch.
 
-    `explained` needs both a residual consistent with noise after the fix (p_after ≥ α) and a
-    better held-out fit; otherwise physics outside the library remains (or the fix is absorbing
-    it), and the report says so instead of claiming the effect as the answer.
+    `explained` needs a residual consistent with noise after the fix (p_after ≥ α), a better
+    held-out fit, and the held-out χ²/dof after the fix (`held_worst`: its worst channel) at
+    most `HELD_OUT_CLAIM` in every channel; otherwise physics outside the library remains (or
+    the fix is absorbing it), and the report says so instead of claiming the effect as the
+    answer.
     """
     if not detected:
         return {"explained": None, "text": "no mismatch detected: the base model fits within the noise"}
@@ -124,6 +142,14 @@ def verdict(detected: bool, chosen: Sequence[str], p_after: float, alpha: float,
             "text": f"mismatch detected; {names} explains most of it, but the residual test still "
             f"rejects weakly (p after the fix = {p_after:.3g} < {alpha:g}; about 1 in {1 / alpha:.0f} "
             "complete fixes does so by chance): something small may remain",
+        }
+    if held_worst is not None and held_worst[1] > HELD_OUT_CLAIM:
+        ch, v = held_worst
+        return {
+            "explained": False,
+            "text": f"mismatch detected; {names} passes the residual test (p after the fix = "
+            f"{p_after:.3g}) but the held-out χ²/dof stays at {v:.3g} > {HELD_OUT_CLAIM:g} in {ch}: "
+            "not claimed as the whole explanation",
         }
     return {"explained": True, "text": f"mismatch detected and explained by {names}"}
 

@@ -13,9 +13,9 @@ from ..diagnostics import Localisation, MisspecificationTest
 from ..problem import Problem
 from ..simulator import CHANNELS, PARAM_NAMES
 from ._candidates import label
-from ._data import held_out_from
+from ._data import held_out_from, held_out_metrics
 from ._fit import FitResult, Fitter
-from ._rank import PAIR_LOG_PRIOR, STRONG, Ranked, verdict
+from ._rank import PAIR_LOG_PRIOR, STRONG, Ranked, verdict, worst_channel
 from ._search import describe
 from ._terms import terms_section
 
@@ -24,21 +24,6 @@ if TYPE_CHECKING:  # annotations only (_diagnose imports this module)
     from ._diagnose import DiagnoseSettings, DiagnosisResult
 
 REQUIRED_KEYS = ("mismatch_detected", "p_value", "located", "effects", "chosen", "fit", "theta")
-
-
-def _held_metrics(pred: np.ndarray, windows: Problem) -> dict:
-    """Per channel on the held-out samples: NRMSE (RMS error / std of the measurement) and
-    χ²/dof (mean squared whitened error; no parameters were fitted on these samples)."""
-    out = {}
-    m = windows.held
-    for c, name in enumerate(windows.channels):
-        e = (pred[:, :, CHANNELS.index(name)] - windows.y[:, :, c])[m]
-        y = windows.y[:, :, c][m]
-        out[name] = {
-            "nrmse": float(np.sqrt(np.mean(e**2)) / (np.std(y) + 1e-12)),
-            "chi2_dof": float(np.mean((e / windows.sigma[c]) ** 2)),
-        }
-    return out
 
 
 def _effect_rows(ranked: Sequence[Ranked]) -> list[dict]:
@@ -92,15 +77,15 @@ def build_report(
     windows, base, final, ranked = found.windows, found.base, found.final, found.ranked
     p_after = float(found.test_after.p_value)
     detected = bool(found.test_before.p_value < s.alpha)
-    fit_before = _held_metrics(found.predictions["before"], windows)
-    fit_after = _held_metrics(found.predictions["after"], windows)
+    fit_before = held_out_metrics(found.predictions["before"], windows)
+    fit_after = held_out_metrics(found.predictions["after"], windows)
     chi_b = float(np.mean([v["chi2_dof"] for v in fit_before.values()]))
     chi_a = float(np.mean([v["chi2_dof"] for v in fit_after.values()]))
     held_improved = bool(chi_a < chi_b) if chosen else None
-    concl = verdict(detected, chosen, p_after, s.alpha, held_improved)
+    concl = verdict(detected, chosen, p_after, s.alpha, held_improved, worst_channel(fit_after))
     held_terms = None
     if "after_terms" in found.predictions:
-        held_terms = _held_metrics(found.predictions["after_terms"], windows)
+        held_terms = held_out_metrics(found.predictions["after_terms"], windows)
     terms = terms_section(found, fit_after, held_terms, int(windows.held.sum()), s.alpha)
     fits = {"before": fit_before, "after": fit_after}
     if "fit" in terms:

@@ -29,7 +29,7 @@ import numpy as np
 from ..simulator import CHANNELS, TERMS, Vehicle, term_effect, term_formula
 from ._candidates import effect_space
 from ._fit import FitData, FitResult, Fitter, _whitened
-from ._rank import STRONG, bic_score
+from ._rank import HELD_OUT_CLAIM, STRONG, bic_score, worst_channel
 
 TERM_EFFECT = "discovered_terms"
 
@@ -218,12 +218,14 @@ def terms_section(found, held_after: dict, held_terms: dict | None, n_held: int,
     """The discovered terms, their held-out fit and test, and what explained the mismatch:
     "discovered term" (kept terms that also predict the held-out part better: held-out
     log-likelihood gain ½·Σ(χ²_library − χ²_terms) ≥ `STRONG`), "library" (the chosen effects
-    leave p ≥ α/10), "unexplained", or "none" (no mismatch).
+    leave p ≥ α/10 and a held-out χ²/dof ≤ `HELD_OUT_CLAIM` in every channel), "unexplained",
+    or "none" (no mismatch).
 
     `found` is the `DiagnosisResult`; `held_after`, `held_terms` the held-out metrics per
     channel after the library fix and with the terms; `n_held` held-out samples per channel."""
     detected = bool(found.test_before.p_value < alpha)
-    library = detected and bool(found.final.effects) and bool(found.test_after.p_value >= alpha / 10)
+    held_ok = worst_channel(held_after)[1] <= HELD_OUT_CLAIM
+    library = detected and bool(found.final.effects) and found.test_after.p_value >= alpha / 10 and held_ok
     out: dict = {"discovered_terms": [], "p_value_after_terms": None, "terms_replace": []}
     td = found.terms
     if not detected:

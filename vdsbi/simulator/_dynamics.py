@@ -109,6 +109,13 @@ class VehicleModel(eqx.Module):
         l_f = theta[0]
         return self.vehicle.mass * l_f * (self.vehicle.wheelbase - l_f) * scale
 
+    def yaw_moment(self, effect_params, ctx: Context) -> Float[Array, ""]:
+        """The effects' extra yaw moment about the centre of gravity, N·m."""
+        total = jnp.zeros_like(ctx.vx)
+        for e, p in zip(self.effects, effect_params):
+            total = total + e.yaw_moment(p, ctx)
+        return total
+
     def radius(self, effect_params) -> Float[Array, ""]:
         scale = jnp.asarray(1.0)
         for e, p in zip(self.effects, effect_params):
@@ -262,7 +269,7 @@ class VehicleModel(eqx.Module):
         alpha_f = delta - jnp.arctan((vy + l_f * r) / vx_pos)
         alpha_r = -jnp.arctan((vy - l_r * r) / vx_pos)
         # Eq. 3, each wheel's longitudinal speed taken as Vx (seed: V_xf = V_xr = V_x).
-        ctx = context(fz_f, fz_r, zero)
+        ctx = context(fz_f, fz_r, zero)._replace(ax=a_x, ay=a_y)
         rw_f = ctx.r_eff_front * wf
         rw_r = ctx.r_eff_rear * wr
         kappa_f = (rw_f - vx) / jnp.maximum(jnp.maximum(rw_f, vx), V_FLOOR)
@@ -280,7 +287,8 @@ class VehicleModel(eqx.Module):
         # Eq. 1 in body axes; gravity components of grade/bank add to the motion only.
         dvx = a_x + gx + vy * r
         dvy = a_y + gy - vx * r
-        dr = (l_f * (fx_f * sin_d + fy_f * cos_d) - l_r * fy_r) / i_z
+        m_z = self.yaw_moment(effect_params, ctx)
+        dr = (l_f * (fx_f * sin_d + fy_f * cos_d) - l_r * fy_r + m_z) / i_z
         d_base = jnp.stack(
             [
                 dvx,
@@ -366,7 +374,9 @@ class VehicleModel(eqx.Module):
         rate = jnp.maximum(vx, 0.0) / veh.relaxation_length
 
         dvy = a_y + gy - vx * r
-        dr = (l_f * (fx_f * sin_d + fy_f * cos_d) - l_r * fy_r) / i_z
+        ctx = ctx._replace(ax=a_x, ay=a_y)
+        m_z = self.yaw_moment(effect_params, ctx)
+        dr = (l_f * (fx_f * sin_d + fy_f * cos_d) - l_r * fy_r + m_z) / i_z
         d_base = jnp.stack(
             [
                 dvx,

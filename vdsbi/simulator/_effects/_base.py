@@ -26,6 +26,10 @@ class Context(NamedTuple):
     omega_rear: Float[Array, ""]
     mass: Float[Array, ""]
     gravity: float
+    # Body accelerations (specific forces), where the hook is called after they are known
+    # (`yaw_moment`, `measure`); 0 elsewhere.
+    ax: Float[Array, ""] | float = 0.0
+    ay: Float[Array, ""] | float = 0.0
 
 
 class AbstractEffect(eqx.Module):
@@ -84,6 +88,10 @@ class AbstractEffect(eqx.Module):
     def body_force(self, p, ctx: Context) -> tuple[Float[Array, ""], Float[Array, ""]]:
         """Non-gravitational force on the body (felt by the IMU), N, body axes."""
         return jnp.asarray(0.0), jnp.asarray(0.0)
+
+    def yaw_moment(self, p, ctx: Context) -> Float[Array, ""]:
+        """Extra yaw moment about the centre of gravity, N·m (ctx carries a_x and a_y)."""
+        return jnp.asarray(0.0)
 
     def gravity_accel(self, p, ctx: Context) -> tuple[Float[Array, ""], Float[Array, ""]]:
         """Gravity component in the road plane, m/s²: accelerates the car, unseen by the IMU."""

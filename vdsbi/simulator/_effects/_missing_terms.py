@@ -1,12 +1,13 @@
 """Candidate terms for physics outside the effect library, and an effect made of a few of them.
 
 Each term adds c·f(signals) to one place of the model: the acting steer or axle torques (an
-input term), the force on the body (per unit mass, so c·f is an acceleration), or one sensor
-reading. f is built from the model's own signals — speeds, accelerations, yaw rate and its
-derivative, steer and its rate, torques — with powers, signs and products; a rate stands for a
-delayed copy (x(t − d) ≈ x − d·ẋ). Discovery fits the coefficients c through the differentiable
-simulator like any effect parameter (`term_effect(keys)` is an effect class whose parameters
-are the chosen terms' c, all 0 at the null), and prints the term as a formula.
+input term), the force or the yaw moment on the body (per unit mass: c·m·f is the force, N, or
+the moment, N·m), or one sensor reading. f is built from the model's own signals — speeds,
+accelerations, yaw rate and its derivative, steer and its rate, torques — with powers, signs
+and products; a rate stands for a delayed copy (x(t − d) ≈ x − d·ẋ). Discovery fits the
+coefficients c through the differentiable simulator like any effect parameter
+(`term_effect(keys)` is an effect class whose parameters are the chosen terms' c, all 0 at the
+null), and prints the term as a formula.
 
 The library is deliberately not registered in `EFFECTS`: it is searched by sparse selection
 when the named effects leave a mismatch (`vdsbi.discovery`), not one effect at a time.
@@ -26,7 +27,7 @@ class Term(NamedTuple):
     """One candidate: `target` is where c·f enters, `feature` the formula of f, `unit` c's unit,
     `bound` the largest |c| fitted."""
 
-    target: str  # steer | torque_front | torque_rear | force_x | force_y | ax | ay | yaw_rate
+    target: str  # steer | torque_front | torque_rear | force_x | force_y | moment_z | ax | ay | yaw_rate
     feature: str
     unit: str
     bound: float
@@ -34,6 +35,7 @@ class Term(NamedTuple):
 
 #: The candidate terms. Signals: δ steer (rad), δ̇ its rate, T_f, T_r axle torques (N·m), vx, vy
 #: (m/s), r yaw rate (rad/s), ṙ its rate, a_c = vx·r (m/s²), ax, ay the modelled accelerations.
+#: Forces and the yaw moment are per unit mass: c·m·f is the force (N) or moment (N·m).
 TERMS: dict[str, Term] = {
     "steer_gain": Term("steer", "δ", "-", 2.0),
     "steer_cubed": Term("steer", "δ³", "1/rad²", 800.0),
@@ -49,6 +51,12 @@ TERMS: dict[str, Term] = {
     "side_quadratic": Term("force_y", "a_c·|a_c|", "s²/m", 0.2),
     "side_cubic": Term("force_y", "a_c³", "s⁴/m²", 0.04),
     "side_slip": Term("force_y", "vy", "1/s", 5.0),
+    # yaw moment per unit mass (c·f in m²/s²): uneven axle saturation, load-sensitive tyres
+    "yaw_moment_linear": Term("moment_z", "a_c", "m", 0.5),
+    "yaw_moment_quadratic": Term("moment_z", "a_c·|a_c|", "s²", 0.1),
+    "yaw_moment_cubic": Term("moment_z", "a_c³", "s⁴/m", 0.02),
+    "yaw_moment_load_transfer": Term("moment_z", "ax·a_c", "s²", 0.2),
+    "yaw_damping": Term("moment_z", "r", "m²/s", 5.0),
     "ay_scale": Term("ay", "ay", "-", 0.5),
     "ay_quadratic": Term("ay", "ay·|ay|", "s²/m", 0.2),
     "ay_yaw_accel": Term("ay", "ṙ", "m", 3.0),
@@ -83,6 +91,7 @@ def _feature(name: str, sig: dict):
         "a_c·|a_c|": lambda: sig["vx"] * sig["r"] * jnp.abs(sig["vx"] * sig["r"]),
         "a_c³": lambda: (sig["vx"] * sig["r"]) ** 3,
         "vy": lambda: sig["vy"],
+        "ax·a_c": lambda: sig["ax"] * sig["vx"] * sig["r"],
         "ay": lambda: sig["ay"],
         "ay·|ay|": lambda: sig["ay"] * jnp.abs(sig["ay"]),
         "ax": lambda: sig["ax"],
@@ -131,6 +140,10 @@ class _TermEffect(AbstractEffect):
         fy = ctx.mass * self._sum(p, "force_y", sig)
         return jnp.asarray(fx) * jnp.ones_like(ctx.vx), jnp.asarray(fy) * jnp.ones_like(ctx.vx)
 
+    def yaw_moment(self, p, ctx):
+        sig = {"vx": ctx.vx, "vy": ctx.vy, "r": ctx.r, "ax": ctx.ax}
+        return jnp.asarray(ctx.mass * self._sum(p, "moment_z", sig)) * jnp.ones_like(ctx.vx)
+
     def measure(self, p, y, ctx):
         sig = {"ax": y["ax"], "ay": y["ay"], "r": y["yaw_rate"], "r_dot": ctx.r_dot}
         y = dict(y)
@@ -164,6 +177,7 @@ _TARGET_TEXT = {
     "torque_rear": "applied rear torque T_r += {c}·{f}",
     "force_x": "longitudinal force += {c}·m·{f}",
     "force_y": "lateral force += {c}·m·{f}",
+    "moment_z": "yaw moment += {c}·m·{f}",
     "ax": "ax measured as ax + {c}·{f}",
     "ay": "ay measured as ay + {c}·{f}",
     "yaw_rate": "yaw_rate measured as yaw_rate + {c}·{f}",
