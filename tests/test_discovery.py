@@ -63,7 +63,9 @@ def test_report_has_required_keys(quick):
     assert rep["effects"][0]["name"] == "sensor_bias" or "sensor_bias" in rep["effects"][0]["name"]
     for when in ("before", "after"):
         for ch, d in rep["fit"][when].items():
-            assert ch in CHANNELS and set(d) == {"nrmse", "chi2_dof"}
+            assert ch in CHANNELS and set(d) == {"nrmse", "chi2_dof", "chi2_dof_predictive"}
+            # the parameter uncertainty only widens the predictive distribution
+            assert 0 < d["chi2_dof_predictive"] <= d["chi2_dof"]
         assert set(rep["theta"][when]) == set(PARAM_NAMES)
 
 

@@ -49,16 +49,23 @@ def held_out_from(problem: Problem) -> list[float]:
     return out
 
 
-def held_out_metrics(pred: np.ndarray, windows: Problem) -> dict:
+def held_out_metrics(pred: np.ndarray, windows: Problem, var: np.ndarray | None = None) -> dict:
     """Per channel on the held-out samples: NRMSE (RMS error / std of the measurement) and
-    χ²/dof (mean squared whitened error; no parameters were fitted on these samples)."""
+    χ²/dof (mean squared whitened error; no parameters were fitted on these samples). With
+    `var` (W, T, 6), the variance of the prediction that the fit's parameter uncertainty
+    carries, also `chi2_dof_predictive`: the squared error over σ² + var, the check of the
+    held-out data against the fit's own predictive distribution."""
     out = {}
     m = windows.held
     for c, name in enumerate(windows.channels):
-        e = (pred[:, :, CHANNELS.index(name)] - windows.y[:, :, c])[m]
+        k = CHANNELS.index(name)
+        e = (pred[:, :, k] - windows.y[:, :, c])[m]
         y = windows.y[:, :, c][m]
         out[name] = {
             "nrmse": float(np.sqrt(np.mean(e**2)) / (np.std(y) + 1e-12)),
             "chi2_dof": float(np.mean((e / windows.sigma[c]) ** 2)),
         }
+        if var is not None:
+            total = windows.sigma[c] ** 2 + var[:, :, k][m]
+            out[name]["chi2_dof_predictive"] = float(np.mean(e**2 / total))
     return out

@@ -65,6 +65,7 @@ class DiagnosisResult:
     localisation: Localisation
     predictions: dict
     residual_stretches: dict
+    variances: dict = dataclasses.field(default_factory=dict)  # of the predictions, same keys
     terms: TermDiscovery | None = None
     test_terms: MisspecificationTest | None = None
 
@@ -252,12 +253,17 @@ def _locate(before: _Check, windows: Problem, s: DiagnoseSettings, say) -> tuple
     return loc, detected
 
 
-def _held_out_predictions(fitter: Fitter, windows: Problem, base: FitResult, decision: _Decision) -> dict:
-    """Whole-window predictions of the base and the chosen model, (W, K, 6) each."""
+def _held_out_predictions(fitter: Fitter, windows: Problem, base: FitResult, decision: _Decision):
+    """Whole-window predictions of the base and the chosen model, (W, K, 6) each, and their
+    variances from the fits' parameter uncertainty."""
     full = fit_data(windows, "valid", truncate=False)
     before = fitter.predict(base.z, (), full)
-    after = fitter.predict(decision.final.z, decision.chosen, full) if decision.chosen else before
-    return {"before": before, "after": after}
+    var_before = fitter.prediction_variance(base, full)
+    if not decision.chosen:
+        return {"before": before, "after": before}, {"before": var_before, "after": var_before}
+    after = fitter.predict(decision.final.z, decision.chosen, full)
+    var_after = fitter.prediction_variance(decision.final, full)
+    return {"before": before, "after": after}, {"before": var_before, "after": var_after}
 
 
 def _search(coarse: Fitter, base_c: FitResult, names: tuple[str, ...], s: DiagnoseSettings, say) -> _Search:
@@ -372,17 +378,16 @@ def diagnose(
         search = _search(coarse, base_c, names, s, say)
         decision = _decide(search, fitter, base, detected, s, say)
         after = _check(decision.final, windows, s.seed + 1, s)
-        predictions = _held_out_predictions(fitter, windows, base, decision)
-        held_ok = (
-            not detected
-            or worst_channel(held_out_metrics(predictions["after"], windows))[1] <= HELD_OUT_CLAIM
-        )
+        predictions, variances = _held_out_predictions(fitter, windows, base, decision)
+        held = held_out_metrics(predictions["after"], windows, variances["after"])
+        held_ok = not detected or worst_channel(held)[1] <= HELD_OUT_CLAIM
         terms, test_terms = _describe_remainder(
             vehicle, fitter, windows, base, decision, after, held_ok, s, say
         )
         if terms is not None and terms.fit is not None:
             full = fit_data(windows, "valid", truncate=False)
             predictions["after_terms"] = terms.fitter.predict(terms.fit.z, terms.effects, full)
+            variances["after_terms"] = terms.fitter.prediction_variance(terms.fit, full)
         sep = separability(search.ranked, base_c)  # all at the search step, against its own none
     found = DiagnosisResult(
         report={},
@@ -394,6 +399,7 @@ def diagnose(
         test_after=after.test,
         localisation=loc,
         predictions=predictions,
+        variances=variances,
         residual_stretches={"before": before.residual, "after": after.residual, "t": before.t},
         terms=terms,
         test_terms=test_terms,

@@ -164,6 +164,12 @@ def _predict_jit(model, space, data, z, active, solver):
 
 
 @eqx.filter_jit
+def _predict_jacobian(model, space, data, z, active, free, solver):
+    fn = lambda y: _predict(model, space, data, z.at[free].set(y), active, solver)
+    return jax.jacfwd(fn)(z[free])
+
+
+@eqx.filter_jit
 def _fit_free(model, space, data, z, active, free, prec, max_iter, tol, solver):
     """Levenberg–Marquardt over the entries `free` of z (padded with an out-of-range index,
     whose slots nothing reads: their prior keeps them at 0)."""
@@ -194,6 +200,7 @@ class FitResult:
         free: indices of the free entries of z (K,).
         iterations: LM iterations used.
         converged: whether the relative cost change fell below tolerance.
+        cov: (K, K) Laplace covariance of the free entries of z (inflated by χ²/dof > 1).
     """
 
     effects: tuple[str, ...]
@@ -211,6 +218,7 @@ class FitResult:
     free: np.ndarray
     iterations: int
     converged: bool
+    cov: np.ndarray | None = None
 
     @property
     def chi2_dof(self) -> float:
@@ -299,6 +307,17 @@ class Fitter:
         d = self.data if data is None else data
         return np.asarray(_predict_jit(self.model, self.space, d, jnp.asarray(z), act, self.solver))
 
+    def prediction_variance(self, fit: FitResult, data: FitData | None = None) -> np.ndarray:
+        """(W, T, 6) variance of the predicted readings on `data` that the fit's parameter
+        uncertainty (its Laplace covariance, linearised) carries."""
+        act = jnp.asarray(self.active_mask(fit.effects))
+        d = self.data if data is None else data
+        jac = _predict_jacobian(
+            self.model, self.space, d, jnp.asarray(fit.z), act, jnp.asarray(fit.free), self.solver
+        )
+        jac = np.asarray(jac)
+        return np.einsum("...k,kl,...l->...", jac, fit.cov, jac)
+
     def fit(
         self,
         effects: Sequence[str] = (),
@@ -386,6 +405,7 @@ class Fitter:
             free=free,
             iterations=iterations,
             converged=converged,
+            cov=cov_z,
         )
 
 

@@ -77,15 +77,16 @@ def build_report(
     windows, base, final, ranked = found.windows, found.base, found.final, found.ranked
     p_after = float(found.test_after.p_value)
     detected = bool(found.test_before.p_value < s.alpha)
-    fit_before = held_out_metrics(found.predictions["before"], windows)
-    fit_after = held_out_metrics(found.predictions["after"], windows)
+    var = found.variances
+    fit_before = held_out_metrics(found.predictions["before"], windows, var.get("before"))
+    fit_after = held_out_metrics(found.predictions["after"], windows, var.get("after"))
     chi_b = float(np.mean([v["chi2_dof"] for v in fit_before.values()]))
     chi_a = float(np.mean([v["chi2_dof"] for v in fit_after.values()]))
     held_improved = bool(chi_a < chi_b) if chosen else None
     concl = verdict(detected, chosen, p_after, s.alpha, held_improved, worst_channel(fit_after))
     held_terms = None
     if "after_terms" in found.predictions:
-        held_terms = held_out_metrics(found.predictions["after_terms"], windows)
+        held_terms = held_out_metrics(found.predictions["after_terms"], windows, var.get("after_terms"))
     terms = terms_section(found, fit_after, held_terms, int(windows.held.sum()), s.alpha)
     fits = {"before": fit_before, "after": fit_after}
     if "fit" in terms:
@@ -274,12 +275,17 @@ def markdown(rep: dict) -> str:
             "absorbing some other mismatch; do not take it as the missing physics."
         )
         L.append("")
-    L.append("| channel | NRMSE before | NRMSE after | χ²/dof before | χ²/dof after |")
-    L.append("|---|---|---|---|---|")
+    L.append(
+        "| channel | NRMSE before | NRMSE after | χ²/dof before | χ²/dof after | "
+        "χ²/dof after, predictive (noise + parameter uncertainty) |"
+    )
+    L.append("|---|---|---|---|---|---|")
     for ch, b in rep["fit"]["before"].items():
         a = rep["fit"]["after"][ch]
+        pred = a.get("chi2_dof_predictive")
         L.append(
-            f"| {ch} | {b['nrmse']:.4f} | {a['nrmse']:.4f} | {b['chi2_dof']:.3f} | {a['chi2_dof']:.3f} |"
+            f"| {ch} | {b['nrmse']:.4f} | {a['nrmse']:.4f} | {b['chi2_dof']:.3f} | {a['chi2_dof']:.3f} | "
+            f"{'—' if pred is None else f'{pred:.3f}'} |"
         )
     if "after_terms" in rep["fit"]:
         L.append("")
