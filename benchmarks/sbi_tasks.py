@@ -85,7 +85,9 @@ def _rounds(state):
     return [{k: h.get(k) for k in keys} for h in state.history]
 
 
-def run_cell(task_name, method, budget, n_obs, num_samples, seed, source="sbibm", overrides=None):
+def run_cell(
+    task_name, method, budget, n_obs, num_samples, seed, source="sbibm", overrides=None, first_obs=1
+):
     task = get_task(task_name)
     obs = _Observations(task, source)
     cfg = config_for(budget, **(overrides or {}))
@@ -101,7 +103,8 @@ def run_cell(task_name, method, budget, n_obs, num_samples, seed, source="sbibm"
         times.append(time.perf_counter() - t0)
         invalid += state.num_invalid
         rounds.append(_rounds(state))
-    for i in range(1, n_obs + 1):
+    obs_ids = list(range(first_obs, first_obs + n_obs))
+    for i in obs_ids:
         x_o = obs.x(i)
         if method == "apt":
             t0 = time.perf_counter()
@@ -129,6 +132,7 @@ def run_cell(task_name, method, budget, n_obs, num_samples, seed, source="sbibm"
         "c2st_mean": float(np.mean(scores)),
         "c2st_sd": float(np.std(scores, ddof=1)) if len(scores) > 1 else 0.0,
         "n_obs": len(scores),
+        "obs_ids": obs_ids,
         "train_s": float(np.mean(times)),
         "c2st": [float(s) for s in scores],
         "num_invalid_simulations": int(invalid),
@@ -166,6 +170,7 @@ def main():
     ap.add_argument("--methods", nargs="+", default=["npe", "apt"])
     ap.add_argument("--budgets", nargs="+", type=int, default=list(BUDGETS))
     ap.add_argument("--n-obs", type=int, default=10)
+    ap.add_argument("--first-obs", type=int, default=1, help="observations first..first+n_obs-1")
     ap.add_argument("--observations", choices=["sbibm", "ours"], default="sbibm")
     ap.add_argument("--num-samples", type=int, default=10_000)
     ap.add_argument("--seed", type=int, default=0)
@@ -188,7 +193,9 @@ def main():
         if (t, m, b) in done:
             continue
         print(f"cell {t} {m} {b}", flush=True)
-        cell = run_cell(t, m, b, args.n_obs, args.num_samples, args.seed, args.observations, overrides)
+        cell = run_cell(
+            t, m, b, args.n_obs, args.num_samples, args.seed, args.observations, overrides, args.first_obs
+        )
         results = _save(args.out, cell, args.observations)
         print(table(results), flush=True)
 
