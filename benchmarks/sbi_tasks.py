@@ -157,7 +157,8 @@ def table(results) -> str:
                 else:
                     mark = "✓" if r["c2st_mean"] <= pub else "✗"
                     cells.append(
-                        f"{r['c2st_mean']:.3f}±{r['c2st_sd']:.3f} (sbibm {pub:.3f}) {mark} [{r['train_s']:.0f}s]"
+                        f"{r['c2st_mean']:.3f}±{r['c2st_sd']:.3f} n={r['n_obs']} (sbibm {pub:.3f}) {mark} "
+                        f"[{r['train_s']:.0f}s]"
                     )
             lines.append(f"| {t} | {m} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -241,7 +242,7 @@ def _save(path, result, source):
         os.replace(path + ".tmp", path)
         md = os.path.splitext(path)[0] + ".md"
         with open(md + ".tmp", "w") as f:
-            f.write("# sbibm tasks: C2ST (mean±sd over observations) [training wall time]\n\n")
+            f.write("# sbibm tasks: C2ST (mean±sd over n observations) [training wall time]\n\n")
             f.write(table(results) + "\n")
         os.replace(md + ".tmp", md)
     return results
