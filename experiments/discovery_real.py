@@ -23,6 +23,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+import jax  # noqa: E402
+
 from vdsbi.discovery import diagnose  # noqa: E402
 
 QUICK_CANDIDATES = ("tyre_friction", "sensor_scale", "yaw_inertia")
@@ -50,6 +52,9 @@ def run_one(drive: Path, mode: str, out: Path, quick: bool) -> dict:
     )
     res.report["seconds"] = time.perf_counter() - t0
     (folder / "report.json").write_text(json.dumps(res.report, indent=1, default=float))
+    # Each diagnosis compiles many kernels; free them or a long process runs out of memory
+    # mappings for LLVM's JIT (seen on the fourth drive-mode in one process).
+    jax.clear_caches()
     return res.report
 
 
