@@ -28,6 +28,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ._effects import AbstractEffect, Context
+from ._fastmath import arctan
 from ._inputs import Inputs
 from ._tire import dugoff_demand, dugoff_with_load
 from ._vehicle import CHANNELS, GRAVITY, Vehicle
@@ -171,8 +172,8 @@ class VehicleModel(eqx.Module):
             l_f = theta[0]
             l_r = self.vehicle.wheelbase - l_f
             vx_pos = jnp.maximum(v0, V_FLOOR)
-            a_f0 = u[0] - jnp.arctan((vy0 + l_f * r0) / vx_pos)
-            a_r0 = -jnp.arctan((vy0 - l_r * r0) / vx_pos)
+            a_f0 = u[0] - arctan((vy0 + l_f * r0) / vx_pos)
+            a_r0 = -arctan((vy0 - l_r * r0) / vx_pos)
         base = jnp.stack(
             [
                 v0,
@@ -266,8 +267,8 @@ class VehicleModel(eqx.Module):
         # Eq. 2, 4, 5: slip angles from contact-patch velocities; Vx floored at V_FLOOR
         # because eq. 2–3 are singular at standstill.
         vx_pos = jnp.maximum(vx, V_FLOOR)
-        alpha_f = delta - jnp.arctan((vy + l_f * r) / vx_pos)
-        alpha_r = -jnp.arctan((vy - l_r * r) / vx_pos)
+        alpha_f = delta - arctan((vy + l_f * r) / vx_pos)
+        alpha_r = -arctan((vy - l_r * r) / vx_pos)
         # Eq. 3, each wheel's longitudinal speed taken as Vx (seed: V_xf = V_xr = V_x).
         ctx = context(fz_f, fz_r, zero)._replace(ax=a_x, ay=a_y)
         rw_f = ctx.r_eff_front * wf
@@ -369,8 +370,8 @@ class VehicleModel(eqx.Module):
         a_y = (fx_f * sin_d + fy_f * cos_d + fy_r + fby) / m
 
         vx_pos = jnp.maximum(vx, V_FLOOR)
-        alpha_f = delta - jnp.arctan((vy + l_f * r) / vx_pos)
-        alpha_r = -jnp.arctan((vy - l_r * r) / vx_pos)
+        alpha_f = delta - arctan((vy + l_f * r) / vx_pos)
+        alpha_r = -arctan((vy - l_r * r) / vx_pos)
         rate = jnp.maximum(vx, 0.0) / veh.relaxation_length
 
         dvy = a_y + gy - vx * r

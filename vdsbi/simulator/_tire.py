@@ -5,6 +5,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from ._fastmath import tan
+
 Scalar = Float[Array, ""]
 
 
@@ -32,7 +34,7 @@ def dugoff_demand(c_kappa: Scalar, c_alpha: Scalar, kappa: Scalar, alpha: Scalar
     # 1 + κ > 0 always holds for eq. 3's slip (κ ≥ −1); the floor only keeps
     # pathological draws finite so that they can be masked instead of NaN-ing.
     one_k = jnp.maximum(1.0 + kappa, 0.05)
-    tan_a = jnp.tan(alpha)
+    tan_a = tan(alpha)
     demand2 = (c_kappa * kappa) ** 2 + (c_alpha * tan_a) ** 2
     # Double-where: f = 1 when both slips are zero (seed convention, λ → ∞), and a
     # NaN-free gradient of sqrt at 0.
