@@ -65,6 +65,24 @@ def test_cnn_front_filters_see_what_averaging_erases(getkey):
     assert seen > 1e-3 * scale
 
 
+def test_cnn_dense_products_equal_the_convolutions(getkey):
+    """The trunk and the full-rate front run as dense products (fast inside the compiled
+    training loop); they must compute exactly what the equinox convolutions they hold do."""
+    from vdsbi.inference._cnn import _conv_as_products
+
+    emb = CNNEmbedding(getkey(), in_channels=3, out_dim=4, front_filters=5)
+    x = jax.random.normal(getkey(), (403, 3))
+    t = (x.shape[0] // emb.downsample) * emb.downsample
+    padded = jnp.pad(x[:t].T, ((0, 0), (0, emb.downsample)))
+    ref = emb.front(padded)[:, : t // emb.downsample]
+    np.testing.assert_allclose(np.asarray(emb._front(x[:t])), np.asarray(ref), atol=1e-5)
+    h = jax.random.normal(getkey(), (emb.in_channels + emb.front_filters, 50))
+    for conv in emb.convs:  # strided, dilated, "SAME" and explicit padding
+        out = conv(h)
+        np.testing.assert_allclose(np.asarray(_conv_as_products(conv, h)), np.asarray(out), atol=1e-5)
+        h = jax.nn.gelu(out)
+
+
 def test_summary_statistics_properties(getkey):
     x = jax.random.normal(getkey(), (20000, 3))
     s = summary_statistics(x, lags=(1, 5))
