@@ -54,9 +54,18 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 
 
 def config_for(budget: int, **overrides) -> NPEConfig:
-    """The benchmark's settings at ``budget`` (``overrides``: other `NPEConfig` fields)."""
+    """The benchmark's settings at ``budget`` (``overrides``: other `NPEConfig` fields).
+
+    ``theta_map="affine"`` (the flow on θ, as sbi): two_moons 10⁴, 4 training seeds, C2ST
+    0.580 → 0.544 with every seed and observation better (``vs_sbi_variants.py``). The
+    library's default stays ``"logit"`` (vehicle identification relies on it).
+    """
     base = NPEConfig(
-        batch_size=128 if budget <= 10_000 else 512, learning_rate=5e-4, patience=20, max_epochs=500
+        batch_size=128 if budget <= 10_000 else 512,
+        learning_rate=5e-4,
+        patience=20,
+        max_epochs=500,
+        theta_map="affine",
     )
     return dataclasses.replace(base, **overrides)
 

@@ -13,11 +13,16 @@ sampled at sbibm's observations 1..n (``--n-obs``) and scored against sbibm's re
 posterior samples with sbibm's C2ST (scikit-learn MLP, 5-fold). ``*_train_s`` is the training
 wall time (ours includes JIT compilation); sampling and C2ST are not timed.
 
+Ours uses ``theta_map="affine"`` (the flow on θ, as sbi) since the s6 session; the table with the
+library's default logit map is kept in ``benchmarks/results/vs_sbi_logit.{json,md}`` and the
+seed-to-seed screening behind the change in ``vs_sbi_variants.jsonl``.
+
 Writes ``benchmarks/results/vs_sbi.json`` after every cell (finished cells are skipped on a
 re-run), and the table to ``benchmarks/results/vs_sbi.md``.
 """
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -110,6 +115,7 @@ def run_cell(task_name, budget, n_obs, num_samples, seed):
         "ours_c2st_per_obs": ours,
         "sbi_c2st_per_obs": theirs,
         "ours_epochs": epochs,
+        "ours_config": dataclasses.asdict(config_for(budget)),
         "n_obs": n_obs,
         "torch_threads": torch.get_num_threads(),
     }

@@ -247,3 +247,40 @@ def test_later_rounds_wait_for_their_new_data_only(unit, getkey):
 def test_patience_unit_is_checked():
     with pytest.raises(ValueError, match="patience_unit"):
         NPEConfig(patience_unit="steps")
+
+
+def test_new_config_fields_are_checked():
+    with pytest.raises(ValueError, match="theta_map"):
+        NPEConfig(theta_map="probit")
+    with pytest.raises(ValueError, match="ensemble"):
+        NPEConfig(ensemble=0)
+
+
+def test_ensemble_members_are_trained_independently_at_once(getkey):
+    from vdsbi.inference import FlowEnsemble, MaximumLikelihoodLoss, npe
+
+    prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
+    theta = np.asarray(prior.sample(getkey(), 512))
+    x = np.asarray(_gauss_sim(getkey(), theta)[0])
+    cfg = dataclasses.replace(TINY, max_epochs=6, ensemble=3, theta_map="affine")
+    key = getkey()
+    flow, info = npe(key, prior, theta, x, embedding=IdentityEmbedding(2), config=cfg)
+    assert isinstance(flow, FlowEnsemble) and flow.size == 3
+    # the early-stopping criterion is the MEAN of the members' own losses, not the mixture's
+    is_val = np.zeros(512, bool)
+    is_val[np.asarray(jax.random.permutation(jax.random.split(key, 3)[0], 512))[:51]] = True
+    loss = MaximumLikelihoodLoss()
+    members = [float(loss(flow.member(i), theta[is_val][:32], x[is_val][:32], None, None)) for i in range(3)]
+    val_batch = float(jax.numpy.mean(jnp.asarray(members)))
+    assert abs(val_batch - info["best_val_loss"]) < 1e-4
+    mixture = float(loss(flow, theta[is_val][:32], x[is_val][:32], None, None))
+    assert mixture < val_batch - 1e-3  # the mixture's own loss is a different (lower) number
+    # every member learnt, from its own initialisation
+    init = build_flow(
+        jax.random.split(key, 3)[1], prior, IdentityEmbedding(2), theta[~is_val], x[~is_val], cfg
+    )
+    assert all(
+        m < float(loss(init.member(i), theta[is_val][:32], x[is_val][:32], None, None))
+        for i, m in enumerate(members)
+    )
+    assert len({round(m, 4) for m in members}) == 3

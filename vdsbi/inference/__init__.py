@@ -19,6 +19,7 @@ from ._embeddings import (
 )
 from ._flow import (
     ConditionalFlow as ConditionalFlow,
+    FlowEnsemble as FlowEnsemble,
     flow_from_spec as flow_from_spec,
     trainable_filter as trainable_filter,
 )

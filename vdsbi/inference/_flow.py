@@ -4,18 +4,23 @@ Density of θ given x, for ONE θ and ONE x (vmap outside):
 
     θ ∈ box --logit--> z --standardise--> z' --[coupling RQ-spline, LU-linear] × L--> ε ~ N(0, I)
 
-conditioned on ``c = embedding(standardise(x))``. The box map is a fixed bijection,
-so the density is zero outside the prior box and samples always lie inside it.
+conditioned on ``c = embedding(standardise(x))``. With ``theta_map="logit"`` (default) the box
+map is a fixed bijection, so the density is zero outside the prior box and samples always lie
+inside it. With ``theta_map="affine"`` (as sbi) z = θ: the flow lives on R^d, its density is set
+to zero outside the box WITHOUT renormalising (the mass leaking out is lost; ratios at one x,
+e.g. the APT loss, are unaffected) and samples are drawn by rejection.
 Layers are stacked with ``eqx.filter_vmap`` and applied with ``lax.scan``.
 """
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
+from jax.scipy.special import logsumexp
 from jaxtyping import Array, Bool, Float, PRNGKeyArray
 
 from ._embeddings import AbstractEmbedding, embedding_from_spec
@@ -27,27 +32,49 @@ _LOG_2PI = math.log(2.0 * math.pi)
 
 
 class _ResidualNet(eqx.Module):
-    """``in -> hidden``, ``num_blocks`` pre-activation residual blocks, ``hidden -> out``."""
+    """``in -> hidden``, ``num_blocks`` pre-activation residual blocks, ``hidden -> out``.
+
+    With ``context_dim > 0`` the last ``context_dim`` inputs are a context that also gates
+    every block's residual, ``r * sigmoid(W c + b)`` (nflows' ``ResidualNet``, sbi's NSF
+    conditioner); otherwise the context enters through the first layer only.
+    """
 
     first: eqx.nn.Linear
     blocks: tuple[tuple[eqx.nn.Linear, eqx.nn.Linear], ...]
+    gates: tuple[eqx.nn.Linear, ...]
     last: eqx.nn.Linear
+    context_dim: int = eqx.field(static=True)
 
-    def __init__(self, in_dim: int, out_dim: int, hidden: int, num_blocks: int, *, key: PRNGKeyArray):
+    def __init__(
+        self,
+        in_dim: int,
+        out_dim: int,
+        hidden: int,
+        num_blocks: int,
+        *,
+        key: PRNGKeyArray,
+        context_dim: int = 0,
+    ):
         k0, k1, *kb = jax.random.split(key, 2 + 2 * num_blocks)
+        self.context_dim = int(context_dim)
         self.first = eqx.nn.Linear(in_dim, hidden, key=k0)
         self.blocks = tuple(
             (eqx.nn.Linear(hidden, hidden, key=kb[2 * i]), eqx.nn.Linear(hidden, hidden, key=kb[2 * i + 1]))
             for i in range(num_blocks)
         )
+        kg = jax.random.split(jax.random.fold_in(key, 1), num_blocks)  # ungated init unchanged
+        num_gates = num_blocks if context_dim else 0
+        self.gates = tuple(eqx.nn.Linear(context_dim, hidden, key=kg[i]) for i in range(num_gates))
         last = eqx.nn.Linear(hidden, out_dim, key=k1)
         # Near-zero output: every spline starts close to the identity.
         self.last = eqx.tree_at(lambda m: (m.weight, m.bias), last, (last.weight * 1e-2, last.bias * 0.0))
 
     def __call__(self, h):
+        c = h[h.shape[0] - self.context_dim :]
         h = self.first(h)
-        for a, b in self.blocks:
-            h = h + b(jax.nn.relu(a(jax.nn.relu(h))))
+        for i, (a, b) in enumerate(self.blocks):
+            r = b(jax.nn.relu(a(jax.nn.relu(h))))
+            h = h + (r * jax.nn.sigmoid(self.gates[i](c)) if self.gates else r)
         return self.last(h)
 
 
@@ -65,11 +92,14 @@ class _Layer(eqx.Module):
     bound: float = eqx.field(static=True)
     use_lu: bool = eqx.field(static=True)
 
-    def __init__(self, mask, context_dim, *, dim, num_bins, hidden, num_blocks, bound, use_lu, key):
+    def __init__(self, mask, context_dim, *, dim, num_bins, hidden, num_blocks, bound, use_lu, gating, key):
         self.mask = mask
         self.dim, self.num_bins, self.bound, self.use_lu = dim, num_bins, bound, use_lu
         out = dim * num_spline_params(num_bins)
-        self.conditioner = _ResidualNet(dim + context_dim, out, hidden, num_blocks, key=key)
+        gate_dim = context_dim if gating else 0
+        self.conditioner = _ResidualNet(
+            dim + context_dim, out, hidden, num_blocks, key=key, context_dim=gate_dim
+        )
         self.lower = jnp.zeros((dim, dim))
         self.upper = jnp.zeros((dim, dim))
         self.diag_raw = jnp.full((dim,), math.log(math.expm1(1.0 - 1e-3)), dtype=self.lower.dtype)
@@ -127,7 +157,12 @@ class ConditionalFlow(eqx.Module):
         embedding: maps one standardised x to a context vector of length ``embedding.out_dim``.
         x_shape: shape of ONE observation.
         num_layers, num_bins, hidden, num_blocks, tail_bound, use_lu: architecture.
-        theta_standardizer: affine map in the unbounded (logit) space, shape ``(d,)``.
+        context_gating: the context also gates every residual block of the conditioners
+            (as nflows/sbi's NSF); default False (context through the first layer only).
+        theta_standardizer: affine map in the unbounded (logit, or θ) space, shape ``(d,)``.
+        theta_map: ``"logit"`` (box → R^d bijection) or ``"affine"`` (flow on θ itself; sbi's
+            choice: a thin curved posterior is not bent further by the logit). two_moons at
+            10⁴, NPE: see ``benchmarks/results/vs_sbi.md``.
         x_standardizer: applied to x before the embedding.
     """
 
@@ -144,6 +179,8 @@ class ConditionalFlow(eqx.Module):
     num_blocks: int = eqx.field(static=True)
     tail_bound: float = eqx.field(static=True)
     use_lu: bool = eqx.field(static=True)
+    context_gating: bool = eqx.field(static=True)
+    theta_map: str = eqx.field(static=True)
 
     def __init__(
         self,
@@ -158,6 +195,8 @@ class ConditionalFlow(eqx.Module):
         num_blocks: int = 2,
         tail_bound: float = 3.0,
         use_lu: bool = True,
+        context_gating: bool = False,
+        theta_map: str = "logit",
         theta_standardizer: Standardizer | None = None,
         x_standardizer: Standardizer | None = None,
     ):
@@ -165,6 +204,10 @@ class ConditionalFlow(eqx.Module):
         self.x_shape = tuple(int(s) for s in x_shape)
         self.num_layers, self.num_bins, self.hidden = int(num_layers), int(num_bins), int(hidden)
         self.num_blocks, self.tail_bound, self.use_lu = int(num_blocks), float(tail_bound), bool(use_lu)
+        self.context_gating = bool(context_gating)
+        if theta_map not in ("logit", "affine"):
+            raise ValueError(f"theta_map must be 'logit' or 'affine', got {theta_map!r}")
+        self.theta_map = theta_map
         self.prior = prior
         self.embedding = embedding
         self.theta_standardizer = theta_standardizer or Standardizer.identity(self.dim)
@@ -176,6 +219,7 @@ class ConditionalFlow(eqx.Module):
             num_blocks=self.num_blocks,
             bound=self.tail_bound,
             use_lu=self.use_lu,
+            gating=self.context_gating,
         )
         keys = jax.random.split(key, self.num_layers)
         masks = _masks(self.num_layers, self.dim)
@@ -212,7 +256,10 @@ class ConditionalFlow(eqx.Module):
         """``log q(θ | x)`` for ONE θ given a precomputed context; ``-inf`` outside the box."""
         inside = jnp.all((theta >= self.prior.low) & (theta <= self.prior.high))
         safe = jnp.where(inside, theta, 0.5 * (self.prior.low + self.prior.high))
-        z, ld_box = self.prior.to_unbounded(safe)
+        if self.theta_map == "logit":
+            z, ld_box = self.prior.to_unbounded(safe)
+        else:
+            z, ld_box = safe, jnp.zeros((), safe.dtype)
         zs = self.theta_standardizer(z)
         eps, ld_flow = self._to_noise(zs, context)
         base = -0.5 * jnp.sum(eps**2) - 0.5 * self.dim * _LOG_2PI
@@ -224,13 +271,14 @@ class ConditionalFlow(eqx.Module):
         return self.log_prob_context(theta, self.context(x))
 
     def sample_context(self, key: PRNGKeyArray, context: Float[Array, " c"], n: int) -> Float[Array, "n d"]:
-        eps = jax.random.normal(key, (n, self.dim), dtype=self.prior.low.dtype)
+        def draw(k):
+            eps = jax.random.normal(k, (n, self.dim), dtype=self.prior.low.dtype)
+            zs, _ = jax.vmap(lambda e: self._from_noise(e, context))(eps)
+            return jax.vmap(self.theta_standardizer.inverse)(zs)
 
-        def one(e):
-            zs, _ = self._from_noise(e, context)
-            return self.prior.from_unbounded(self.theta_standardizer.inverse(zs))
-
-        return jax.vmap(one)(eps)
+        if self.theta_map == "logit":
+            return jax.vmap(self.prior.from_unbounded)(draw(key))
+        return _rejection(draw, self.prior, key, n)
 
     def sample(self, key: PRNGKeyArray, x: Float[Array, "..."], n: int) -> Float[Array, "n d"]:
         """``n`` draws of θ from ``q(θ | x)`` for ONE x; always strictly inside the prior box."""
@@ -251,18 +299,123 @@ class ConditionalFlow(eqx.Module):
             "num_blocks": self.num_blocks,
             "tail_bound": self.tail_bound,
             "use_lu": self.use_lu,
+            "context_gating": self.context_gating,
+            "theta_map": self.theta_map,
             "embedding": [type(self.embedding).__name__, self.embedding.spec()],
         }
 
 
-def flow_from_spec(spec: dict[str, Any]) -> ConditionalFlow:
-    """Skeleton :class:`ConditionalFlow` with the structure described by ``spec``."""
+_MAX_REJECTION_ROUNDS = 100
+
+
+def _rejection(draw: Callable, prior: BoxPrior, key: PRNGKeyArray, n: int) -> Float[Array, "n d"]:
+    """``n`` draws of ``draw(key) -> (n, d)`` inside the box, in at most 100 rounds of ``n``.
+
+    Slots still empty after that (under 1 % of the mass inside the box) get a draw clipped to
+    the box, so the result always lies in it.
+    """
+    low, high = prior.low, prior.high
+
+    def body(carry):
+        i, count, out = carry
+        cand = draw(jax.random.fold_in(key, i))
+        ok = jnp.all((cand >= low) & (cand <= high), axis=1)
+        pos = count + jnp.cumsum(ok) - 1
+        slot = jnp.where(ok & (pos < n), pos, n)  # n: out of range, dropped
+        out = out.at[slot].set(cand, mode="drop")
+        return i + 1, jnp.minimum(count + jnp.sum(ok), n), out
+
+    def cond(carry):
+        i, count, _ = carry
+        return (count < n) & (i < _MAX_REJECTION_ROUNDS)
+
+    init = (jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), jnp.zeros((n, prior.dim), low.dtype))
+    _, count, out = jax.lax.while_loop(cond, body, init)
+    fill = jnp.clip(draw(jax.random.fold_in(key, _MAX_REJECTION_ROUNDS)), low, high)
+    return jnp.where((jnp.arange(n) < count)[:, None], out, fill)
+
+
+class FlowEnsemble(eqx.Module):
+    """Equal-weight mixture ``q(θ | x) = (1/E) Σ_m q_m(θ | x)`` of ``E`` flows trained at once.
+
+    ``members`` is ONE :class:`ConditionalFlow` whose array leaves carry a leading member axis
+    (built with ``eqx.filter_vmap`` from ``E`` keys), so training and sampling run all members
+    in one vmapped computation. Each member is trained on its own loss (``fit`` minimises the
+    mean of the members' losses, see `member_mean`); the members differ by initialisation. The
+    interface is the flow's: ``context``, ``log_prob(_context)``, ``sample(_context)``, ``spec``.
+    """
+
+    members: ConditionalFlow
+    prior: BoxPrior
+    size: int = eqx.field(static=True)
+
+    def __init__(self, make: Callable[[PRNGKeyArray], ConditionalFlow], keys: PRNGKeyArray):
+        self.members = eqx.filter_vmap(make)(keys)
+        self.size = int(keys.shape[0])
+        self.prior = self.member(0).prior
+
+    @property
+    def dim(self) -> int:
+        return self.members.dim
+
+    @property
+    def x_shape(self) -> tuple[int, ...]:
+        return self.members.x_shape
+
+    def member(self, i: int) -> ConditionalFlow:
+        """Member ``i`` as a plain :class:`ConditionalFlow`."""
+        return jax.tree.map(lambda a: a[i] if eqx.is_array(a) else a, self.members)
+
+    def context(self, x: Float[Array, "..."]) -> Float[Array, "e c"]:
+        """Each member's embedding of ONE observation."""
+        return eqx.filter_vmap(lambda m: m.context(x))(self.members)
+
+    def log_prob_context(self, theta: Float[Array, " d"], context: Float[Array, "e c"]) -> Float[Array, ""]:
+        lp = eqx.filter_vmap(lambda m, c: m.log_prob_context(theta, c))(self.members, context)
+        return logsumexp(lp) - math.log(self.size)
+
+    def log_prob(self, theta: Float[Array, " d"], x: Float[Array, "..."]) -> Float[Array, ""]:
+        return self.log_prob_context(theta, self.context(x))
+
+    def sample_context(self, key: PRNGKeyArray, context: Float[Array, "e c"], n: int) -> Float[Array, "n d"]:
+        """``n`` draws: each from a uniformly chosen member (all members draw ``n``, one is kept)."""
+        k_pick, k_draw = jax.random.split(key)
+        draws = eqx.filter_vmap(lambda m, c, k: m.sample_context(k, c, n))(
+            self.members, context, jax.random.split(k_draw, self.size)
+        )
+        pick = jax.random.randint(k_pick, (n,), 0, self.size)
+        return draws[pick, jnp.arange(n)]
+
+    def sample(self, key: PRNGKeyArray, x: Float[Array, "..."], n: int) -> Float[Array, "n d"]:
+        return self.sample_context(key, self.context(x), n)
+
+    def spec(self) -> dict[str, Any]:
+        return {**self.member(0).spec(), "ensemble": self.size}
+
+
+def member_mean(loss: Callable, flow, *args):
+    """``loss(flow, *args)``; for a :class:`FlowEnsemble` the mean of the members' own losses
+    (independent training), not the mixture's."""
+    if isinstance(flow, FlowEnsemble):
+        return jnp.mean(eqx.filter_vmap(lambda m: loss(m, *args))(flow.members))
+    return loss(flow, *args)
+
+
+def flow_from_spec(spec: dict[str, Any]) -> ConditionalFlow | FlowEnsemble:
+    """Skeleton :class:`ConditionalFlow` (or :class:`FlowEnsemble`) with the structure in ``spec``."""
+    size = int(spec.get("ensemble", 1))
+    if size > 1:
+        return FlowEnsemble(lambda k: _flow_from_spec(spec, k), jax.random.split(jax.random.key(0), size))
+    return _flow_from_spec(spec, jax.random.key(0))
+
+
+def _flow_from_spec(spec: dict[str, Any], key: PRNGKeyArray) -> ConditionalFlow:
     prior = BoxPrior(jnp.asarray(spec["low"]), jnp.asarray(spec["high"]), spec["names"])
     name, espec = spec["embedding"]
     xs = tuple(spec["x_std_shape"])
     xstd = Standardizer(mean=jnp.zeros(xs), std=jnp.ones(xs))
     return ConditionalFlow(
-        jax.random.key(0),
+        key,
         prior,
         embedding_from_spec(name, espec),
         tuple(spec["x_shape"]),
@@ -272,13 +425,17 @@ def flow_from_spec(spec: dict[str, Any]) -> ConditionalFlow:
         num_blocks=spec["num_blocks"],
         tail_bound=spec["tail_bound"],
         use_lu=spec["use_lu"],
+        context_gating=spec.get("context_gating", False),  # absent in files written before it
+        theta_map=spec.get("theta_map", "logit"),
         x_standardizer=xstd,
     )
 
 
-def trainable_filter(flow: ConditionalFlow):
+def trainable_filter(flow: ConditionalFlow | FlowEnsemble):
     """Boolean pytree: True on the trained weights (layers and embedding), False on frozen stats."""
     spec = jax.tree.map(lambda _: False, flow)
+    if isinstance(flow, FlowEnsemble):
+        return eqx.tree_at(lambda f: f.members, spec, replace=trainable_filter(flow.members))
     return eqx.tree_at(
         lambda f: (f.layers, f.embedding),
         spec,

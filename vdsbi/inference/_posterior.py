@@ -69,7 +69,8 @@ class Posterior(eqx.Module):
         return _sample(self.flow, key, self._x(x), int(n))
 
     def log_prob(self, theta: Float[Array, "*batch d"], x=None) -> Float[Array, "*batch"]:
-        """``log q(θ | x)``; ``-inf`` outside the prior box."""
+        """``log q(θ | x)``; ``-inf`` outside the prior box (with ``theta_map="affine"`` not
+        renormalised for the flow's mass outside the box; see `ConditionalFlow`)."""
         theta = jnp.asarray(theta)
         batch = theta.shape[:-1]
         lp = _log_prob(self.flow, theta.reshape(-1, self.flow.dim), self._x(x))

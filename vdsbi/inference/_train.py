@@ -11,7 +11,7 @@ import numpy as np
 import optax
 from jaxtyping import PRNGKeyArray
 
-from ._flow import ConditionalFlow, trainable_filter
+from ._flow import ConditionalFlow, member_mean, trainable_filter
 from ._loss import AbstractLoss
 from ._sharding import data_mesh, replicate, stack_batches
 
@@ -31,7 +31,7 @@ def make_optimizer(learning_rate: float, weight_decay: float, clip_norm: float):
 
 def _update(params, static, opt_state, batch, key, loss: AbstractLoss, optimizer):
     def f(p):
-        return loss(eqx.combine(p, static), *batch, key)
+        return member_mean(loss, eqx.combine(p, static), *batch, key)
 
     value, grads = jax.value_and_grad(f)(params)
     updates, opt_state = optimizer.update(grads, opt_state, params)
@@ -84,7 +84,7 @@ def eval_steps(flow: ConditionalFlow, batches, key: PRNGKeyArray, loss: Abstract
     """Mean loss over ``(num_batches, batch, ...)`` validation batches (the ``live`` ones), in one
     compiled loop."""
     TRACE_COUNTS["eval_steps"] += 1
-    values = jax.lax.map(lambda b: loss(flow, *b, key), batches)
+    values = jax.lax.map(lambda b: member_mean(loss, flow, *b, key), batches)
     live = jnp.ones(values.shape[0], bool) if live is None else live
     return jnp.sum(jnp.where(live, values, 0.0)) / jnp.maximum(jnp.sum(live), 1)
 
