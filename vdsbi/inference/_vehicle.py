@@ -31,9 +31,8 @@ class IdentifySettings:
         num_samples: posterior samples to return.
         truncate: TSNPE proposals instead of the atomic loss.
         config: flow and training hyperparameters; its ``x_standardize`` is overridden by
-            `npe_config` for the CNN (see there). Patience counts epochs over all data in every
-            round (``patience_unit="epochs"``): the shorter later-round patience of the default
-            has not been checked on the vehicle's calibration.
+            `npe_config` for the CNN (see there). Later rounds wait ``ceil(patience · new/all)``
+            epochs (``patience_unit="new_data"``), as for the other tasks.
     """
 
     rounds: int = 5
@@ -43,7 +42,7 @@ class IdentifySettings:
     num_samples: int = 1000
     truncate: bool = False
     config: NPEConfig = NPEConfig(
-        batch_size=256, learning_rate=1e-3, max_epochs=40, patience=6, patience_unit="epochs"
+        batch_size=256, learning_rate=1e-3, max_epochs=40, patience=6, patience_unit="new_data"
     )
 
     @property
