@@ -151,25 +151,16 @@ class CNNEmbedding(AbstractEmbedding):
         if self.front is not None:
             d = jnp.diff(x[:t], axis=0)  # full-rate first differences: high-frequency energy
             glob = jnp.concatenate([glob, 0.5 * jnp.log(d.var(0) + 1e-6)])
-            h = jnp.concatenate([h, jax.nn.gelu(self._front(x[:t]))], axis=0)
+            # zero past the end, so the strided full-rate filter yields one value per block
+            xf = jnp.pad(x[:t].T, ((0, 0), (0, self.downsample)))
+            f = _conv_as_products(self.front, xf)[:, : h.shape[1]]
+            h = jnp.concatenate([h, jax.nn.gelu(f)], axis=0)
         for conv in self.convs:
             h = jax.nn.gelu(_conv_as_products(conv, h))
         # Adaptive average pooling into num_pool equal windows.
         n = (h.shape[1] // self.num_pool) * self.num_pool
         h = h[:, :n].reshape(h.shape[0], self.num_pool, -1).mean(-1)
         return jnp.concatenate([h.reshape(-1), glob])
-
-    def _front(self, x: Float[Array, "T C"]) -> Float[Array, "F T_ds"]:
-        """The strided full-rate convolution (kernel 2·ds, stride ds, zero past the end) as two
-        dense products over blocks of ds samples: the same weights and result as
-        ``self.front`` on the padded input, without XLA's slow strided CPU convolution."""
-        ds = self.downsample
-        blocks = x.reshape(x.shape[0] // ds, ds * self.in_channels)  # (T', ds·C), time-major
-        following = jnp.concatenate([blocks[1:], jnp.zeros_like(blocks[:1])])
-        w = self.front.weight  # (F, C, 2·ds)
-        w0 = w[:, :, :ds].transpose(0, 2, 1).reshape(w.shape[0], -1)  # (F, ds·C)
-        w1 = w[:, :, ds:].transpose(0, 2, 1).reshape(w.shape[0], -1)
-        return w0 @ blocks.T + w1 @ following.T + self.front.bias
 
     def spec(self) -> dict[str, Any]:
         return {

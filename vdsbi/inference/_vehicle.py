@@ -41,9 +41,7 @@ class IdentifySettings:
     embed_dim: int = 32
     num_samples: int = 1000
     truncate: bool = False
-    config: NPEConfig = NPEConfig(
-        batch_size=256, learning_rate=1e-3, max_epochs=40, patience=6, patience_unit="new_data"
-    )
+    config: NPEConfig = NPEConfig(batch_size=256, learning_rate=1e-3, max_epochs=40, patience=6)
 
     @property
     def npe_config(self) -> NPEConfig:
