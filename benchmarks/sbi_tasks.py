@@ -18,6 +18,12 @@ Protocol (differences from sbibm are stated, not hidden):
   observation (sbibm retrains per observation); ``train_s`` is that single training time;
 * APT is run per observation: 10 rounds of budget/10 simulations; ``train_s`` is the mean
   wall time per observation (simulation + training, all rounds).
+
+Cells are stored per observation (``per_observation``: C2ST, APT training, sampling and C2ST
+seconds) with each run's commit, uncommitted changes, device and load average (``runs``). A
+stored cell with the same config is resumed: APT runs only the observations it lacks, so
+pieces (``--first-obs``/``--n-obs``, one heavy-lock hold each) build one cell; NPE (one network)
+reruns whole unless all requested observations are stored. ``--force`` replaces the cell.
 """
 
 import argparse
@@ -25,6 +31,7 @@ import dataclasses
 import fcntl
 import json
 import os
+import subprocess
 import sys
 import time
 
@@ -73,8 +80,8 @@ def config_for(budget: int, **overrides) -> NPEConfig:
 class _Observations:
     """Observation ``i``, its reference samples and the C2ST: sbibm's, or the project's tasks'."""
 
-    def __init__(self, task, source):
-        self.task, self.source = task, source
+    def __init__(self, task, source, c2st_jobs=1):
+        self.task, self.source, self.c2st_jobs = task, source, c2st_jobs
 
     def x(self, i):
         if self.source == "sbibm":
@@ -84,7 +91,7 @@ class _Observations:
     def score(self, key, i, samples, num_samples):
         if self.source == "sbibm":
             ref = _sbibm.reference_posterior_samples(self.task.name, i)[:num_samples]
-            return _sbibm.c2st(ref, np.asarray(samples))
+            return _sbibm.c2st(ref, np.asarray(samples), n_jobs=self.c2st_jobs)
         return c2st(key, self.task.reference_posterior_samples(i, num_samples), samples)
 
 
@@ -94,27 +101,51 @@ def _rounds(state):
     return [{k: h.get(k) for k in keys} for h in state.history]
 
 
+def _provenance():
+    """Commit, uncommitted changes under vdsbi/ and benchmarks/, device, load average, UTC time."""
+
+    def git(*a):
+        r = subprocess.run(["git", *a], cwd=HERE, capture_output=True, text=True)
+        return r.stdout.strip() if r.returncode == 0 else None
+
+    d = jax.devices()[0]
+    return {
+        "commit": git("rev-parse", "--short", "HEAD"),
+        "dirty": (git("status", "--porcelain", "--", "../vdsbi", ".") or "").splitlines(),
+        "device": f"{d.platform}:{d.device_kind}",
+        "loadavg": [round(v, 2) for v in os.getloadavg()],
+        "utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+    }
+
+
 def run_cell(
-    task_name, method, budget, n_obs, num_samples, seed, source="sbibm", overrides=None, first_obs=1
+    task_name, method, budget, obs_ids, num_samples, seed, source="sbibm", overrides=None, c2st_jobs=1
 ):
+    """One (task, method, budget) cell at observations ``obs_ids``: a dict with one record per
+    observation (``per_observation``) and the run's provenance (``runs``); see `summarise`."""
     task = get_task(task_name)
-    obs = _Observations(task, source)
+    obs = _Observations(task, source, c2st_jobs)
     cfg = config_for(budget, **(overrides or {}))
     emb = IdentityEmbedding(task.dim_x)
     key = jax.random.fold_in(jax.random.key(seed), budget)
-    scores, times, invalid, rounds = [], [], 0, []
+    run = {"obs_ids": list(obs_ids), **_provenance()}
+    records = []
     if method == "npe":
-        x1 = obs.x(1)
         t0 = time.perf_counter()
         post, state = apt(
-            key, task.simulate, task.prior, x1, embedding=emb, rounds=1, sims_per_round=budget, config=cfg
+            key,
+            task.simulate,
+            task.prior,
+            obs.x(1),
+            embedding=emb,
+            rounds=1,
+            sims_per_round=budget,
+            config=cfg,
         )
-        times.append(time.perf_counter() - t0)
-        invalid += state.num_invalid
-        rounds.append(_rounds(state))
-    obs_ids = list(range(first_obs, first_obs + n_obs))
+        run.update(train_s=time.perf_counter() - t0, rounds=_rounds(state), invalid=int(state.num_invalid))
+        print(f"  {task_name} npe {budget}: trained in {run['train_s']:.1f} s", flush=True)
     for i in obs_ids:
-        x_o = obs.x(i)
+        x_o, rec = obs.x(i), {"obs_id": i}
         if method == "apt":
             t0 = time.perf_counter()
             post, state = apt(
@@ -127,47 +158,98 @@ def run_cell(
                 sims_per_round=budget // 10,
                 config=cfg,
             )
-            times.append(time.perf_counter() - t0)
-            invalid += state.num_invalid
-            rounds.append(_rounds(state))
-            print(f"  {task_name} apt {budget} obs {i}: {times[-1]:.1f} s", flush=True)
-        samples = post.sample(jax.random.fold_in(key, 1000 + i), num_samples, x=x_o)
-        scores.append(obs.score(jax.random.fold_in(key, 2000 + i), i, samples, num_samples))
-        print(f"  {task_name} {method} {budget} obs {i}: c2st={scores[-1]:.3f}", flush=True)
+            rec.update(
+                train_s=time.perf_counter() - t0, rounds=_rounds(state), invalid=int(state.num_invalid)
+            )
+        t0 = time.perf_counter()
+        samples = np.asarray(post.sample(jax.random.fold_in(key, 1000 + i), num_samples, x=x_o))
+        rec["sample_s"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        rec["c2st"] = float(obs.score(jax.random.fold_in(key, 2000 + i), i, samples, num_samples))
+        rec.update(c2st_s=time.perf_counter() - t0, commit=run["commit"], loadavg=list(os.getloadavg()))
+        train = f" train {rec['train_s']:.1f} s," if "train_s" in rec else ""
+        print(
+            f"  {task_name} {method} {budget} obs {i}:{train} c2st={rec['c2st']:.3f} "
+            f"(sampling {rec['sample_s']:.1f} s, c2st {rec['c2st_s']:.1f} s)",
+            flush=True,
+        )
+        records.append(rec)
+    run["loadavg_end"] = [round(v, 2) for v in os.getloadavg()]
+    cell = {"task": task_name, "method": method, "budget": budget, "config": dataclasses.asdict(cfg)}
+    return summarise({**cell, "per_observation": records, "runs": [run]})
+
+
+def summarise(cell):
+    """Recompute the cell's summary fields from its per-observation records and runs."""
+    recs = sorted(cell["per_observation"], key=lambda r: r["obs_id"])
+    scores = [r["c2st"] for r in recs]
+    if cell["method"] == "apt":
+        times = [r["train_s"] for r in recs]
+        invalid = sum(r.get("invalid", 0) for r in recs)
+        rounds = [r["rounds"] for r in recs]
+    else:  # amortised: one training per run (one run per NPE cell, see `merge`)
+        times = [run["train_s"] for run in cell["runs"]]
+        invalid = sum(run.get("invalid", 0) for run in cell["runs"])
+        rounds = [run["rounds"] for run in cell["runs"]]
+    runs = cell["runs"]
     return {
-        "task": task_name,
-        "method": method,
-        "budget": budget,
+        **cell,
+        "per_observation": recs,
         "c2st_mean": float(np.mean(scores)),
         "c2st_sd": float(np.std(scores, ddof=1)) if len(scores) > 1 else 0.0,
         "n_obs": len(scores),
-        "obs_ids": obs_ids,
+        "obs_ids": [r["obs_id"] for r in recs],
         "train_s": float(np.mean(times)),
-        "c2st": [float(s) for s in scores],
+        "c2st": scores,
         "num_invalid_simulations": int(invalid),
-        "published": PUBLISHED[(task_name, method)][BUDGETS.index(budget)],
-        "config": dataclasses.asdict(cfg),
+        "published": PUBLISHED[(cell["task"], cell["method"])][BUDGETS.index(cell["budget"])],
         "rounds": rounds,
+        "commit": sorted({run["commit"] for run in runs if run.get("commit")}),
+        "device": sorted({run["device"] for run in runs}),
+        "loadavg": [[run["loadavg"][0], run["loadavg_end"][0]] for run in runs],  # 1-min, start/end
     }
+
+
+def merge(old, new):
+    """``new`` merged into ``old`` (same task, method, budget): APT observations are independent
+    runs, so pieces run at other observations with the same config join the cell (``new``
+    replaces observations present in both). NPE is one amortised network per cell, and a
+    config change means another estimator: then ``new`` replaces ``old`` whole."""
+    if old is None or "per_observation" not in old:
+        return new
+    if new["method"] != "apt" or old["config"] != new["config"]:
+        return new
+    ids = set(new["obs_ids"])
+    recs = [r for r in old["per_observation"] if r["obs_id"] not in ids] + new["per_observation"]
+    return summarise({**new, "per_observation": recs, "runs": old["runs"] + new["runs"]})
+
+
+def todo(old, method, config, obs_ids):
+    """Observations of ``obs_ids`` still to run, given the stored cell ``old`` (resume)."""
+    if old is None or "per_observation" not in old or old["config"] != config:
+        return list(obs_ids)
+    missing = [i for i in obs_ids if i not in old["obs_ids"]]
+    return missing if (method == "apt" or not missing) else list(obs_ids)
 
 
 def table(results) -> str:
     by = {(r["task"], r["method"], r["budget"]): r for r in results}
+    methods = ["npe", "apt"] + sorted({r["method"] for r in results} - {"npe", "apt"})
     head = "| task | method | " + " | ".join(f"{b:.0e}" for b in BUDGETS) + " |"
     lines = [head, "|---|---|" + "---|" * len(BUDGETS)]
     for t in TASKS:
-        for m in ("npe", "apt"):
+        for m in methods:
             cells = []
             for j, b in enumerate(BUDGETS):
-                pub = PUBLISHED[(t, m)][j]
+                pub = PUBLISHED.get((t, m), (None,) * len(BUDGETS))[j]
+                ref = "" if pub is None else f" (sbibm {pub:.3f})"
                 r = by.get((t, m, b))
                 if r is None:
-                    cells.append(f"not run (sbibm {pub:.3f})")
+                    cells.append(f"not run{ref}")
                 else:
-                    mark = "✓" if r["c2st_mean"] <= pub else "✗"
+                    mark = "" if pub is None else (" ✓" if r["c2st_mean"] <= pub else " ✗")
                     cells.append(
-                        f"{r['c2st_mean']:.3f}±{r['c2st_sd']:.3f} n={r['n_obs']} (sbibm {pub:.3f}) {mark} "
-                        f"[{r['train_s']:.0f}s]"
+                        f"{r['c2st_mean']:.3f}±{r['c2st_sd']:.3f} n={r['n_obs']}{ref}{mark} [{r['train_s']:.0f}s]"
                     )
             lines.append(f"| {t} | {m} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -189,24 +271,31 @@ def main():
         choices=["epochs", "new_data"],
         help="NPEConfig.patience_unit (default: its default)",
     )
+    ap.add_argument("--force", action="store_true", help="rerun and replace stored cells (else resume)")
+    ap.add_argument("--c2st-jobs", type=int, default=1, help="parallel C2ST folds (same result as 1)")
+    ap.add_argument("--table", action="store_true", help="only rewrite the .md table from the JSON")
     ap.add_argument("--out", default=os.path.join(HERE, "results", "sbi_tasks.json"))
     args = ap.parse_args()
     overrides = {} if args.patience_unit is None else {"patience_unit": args.patience_unit}
     if args.quick:
         args.tasks, args.budgets, args.n_obs = ["two_moons"], [1_000], 2
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
+    if args.table:
+        return _write_md(args.out, _load(args.out))
     if _source(args.out) not in (None, args.observations):  # never mix the two protocols
         raise SystemExit(f"{args.out} holds {_source(args.out)!r} observations; pass another --out")
-    done = {_key(r) for r in _load(args.out)}  # resume: finished cells are skipped
+    obs_ids = list(range(args.first_obs, args.first_obs + args.n_obs))
     cells = [(b, m, t) for b in sorted(args.budgets) for m in args.methods for t in args.tasks]
     for b, m, t in cells:
-        if (t, m, b) in done:
+        stored = None if args.force else {_key(r): r for r in _load(args.out)}.get((t, m, b))
+        ids = todo(stored, m, dataclasses.asdict(config_for(b, **overrides)), obs_ids)
+        if not ids:  # resume: finished observations are skipped
             continue
-        print(f"cell {t} {m} {b}", flush=True)
+        print(f"cell {t} {m} {b} observations {ids}", flush=True)
         cell = run_cell(
-            t, m, b, args.n_obs, args.num_samples, args.seed, args.observations, overrides, args.first_obs
+            t, m, b, ids, args.num_samples, args.seed, args.observations, overrides, args.c2st_jobs
         )
-        results = _save(args.out, cell, args.observations)
+        results = _save(args.out, cell, args.observations, replace=args.force)
         print(table(results), flush=True)
 
 
@@ -228,17 +317,28 @@ def _load(path):
         return json.load(f).get("results", [])
 
 
-def _save(path, result, source):
-    """Merge one finished cell into the JSON under a lock, so several workers (e.g. one per
-    core, each given other --tasks/--budgets) can fill the same grid without losing cells."""
+def _write_md(path, results):
+    md = os.path.splitext(path)[0] + ".md"
+    with open(md + ".tmp", "w") as f:
+        f.write("# sbibm tasks: C2ST (mean±sd over n observations) [training wall time]\n\n")
+        f.write(table(results) + "\n")
+    os.replace(md + ".tmp", md)
+
+
+def _save(path, result, source, replace=False):
+    """Merge one finished cell (or piece of a cell, see `merge`) into the JSON under a lock, so
+    several workers (each given other --tasks/--budgets/--first-obs) can fill the same grid
+    without losing cells; ``replace``: the stored cell is dropped instead."""
     with open(path + ".lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
-        results = [r for r in _load(path) if _key(r) != _key(result)] + [result]
+        stored = {_key(r): r for r in _load(path)}
+        stored[_key(result)] = result if replace else merge(stored.get(_key(result)), result)
+        methods = ["npe", "apt"] + sorted({m for _, m, _ in stored} - {"npe", "apt"})
         order = {
             (t, m, b): i
-            for i, (b, m, t) in enumerate((b, m, t) for b in BUDGETS for m in ("npe", "apt") for t in TASKS)
+            for i, (b, m, t) in enumerate((b, m, t) for b in BUDGETS for m in methods for t in TASKS)
         }
-        results.sort(key=lambda r: order.get(_key(r), len(order)))
+        results = sorted(stored.values(), key=lambda r: order.get(_key(r), len(order)))
         d = jax.devices()[0]
         meta = {
             "devices": [str(d) for d in jax.devices()],
@@ -249,11 +349,7 @@ def _save(path, result, source):
         with open(path + ".tmp", "w") as f:
             json.dump({"results": results, "observations": source, "meta": meta}, f, indent=1)
         os.replace(path + ".tmp", path)
-        md = os.path.splitext(path)[0] + ".md"
-        with open(md + ".tmp", "w") as f:
-            f.write("# sbibm tasks: C2ST (mean±sd over n observations) [training wall time]\n\n")
-            f.write(table(results) + "\n")
-        os.replace(md + ".tmp", md)
+        _write_md(path, results)
     return results
 
 
