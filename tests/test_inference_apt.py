@@ -244,6 +244,23 @@ def test_later_rounds_wait_for_their_new_data_only(unit, getkey):
         assert min(h["patience"] for h in hist) < 6
 
 
+def test_cosine_schedule_runs_its_course_without_recompiling(getkey):
+    # The learning rate lives in the optimiser state: a new value every epoch reuses the
+    # compiled step. A round that ran its whole cosine schedule counts as converged, so the
+    # next round scales its patience as after an early stop.
+    prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
+    cfg = dataclasses.replace(TINY, max_epochs=4, patience=6, lr_schedule="cosine")
+    before = TRACE_COUNTS["train_steps"]
+    kw = dict(embedding=IdentityEmbedding(2), rounds=2, sims_per_round=160, config=cfg)
+    _, state = apt(getkey(), _gauss_sim, prior, jnp.zeros(2), **kw)
+    assert TRACE_COUNTS["train_steps"] - before <= 2  # one per loss, not one per epoch
+    first, second = state.history
+    assert first["epochs"] == 4  # patience 6 > 4 epochs: no early stop
+    assert second["patience"] == 3  # ceil(6 / 2), not the full 6 of an unconverged round
+    with pytest.raises(ValueError, match="lr_schedule"):
+        NPEConfig(lr_schedule="step")
+
+
 def test_patience_unit_is_checked():
     with pytest.raises(ValueError, match="patience_unit"):
         NPEConfig(patience_unit="steps")

@@ -55,4 +55,5 @@ def npe(
         max_epochs=config.max_epochs,
         patience=config.patience,
         mesh=mesh,
+        lr_schedule=config.lr_schedule,
     )

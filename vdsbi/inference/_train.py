@@ -2,6 +2,7 @@
 
 import collections
 import functools
+import math
 from collections.abc import Callable
 
 import equinox as eqx
@@ -21,12 +22,35 @@ TRACE_COUNTS: collections.Counter = collections.Counter()
 
 
 @functools.lru_cache(maxsize=32)
-def make_optimizer(learning_rate: float, weight_decay: float, clip_norm: float):
-    """``clip_by_global_norm`` then AdamW (cached so repeated fits reuse the jit cache)."""
+def make_optimizer(learning_rate: float, weight_decay: float, clip_norm: float, scheduled: bool = False):
+    """``clip_by_global_norm`` then AdamW (cached so repeated fits reuse the jit cache).
+
+    ``scheduled``: the learning rate is an entry of the optimiser state (``inject_hyperparams``)
+    that `fit` sets every epoch, so a schedule never recompiles the step.
+    """
+    adamw = optax.inject_hyperparams(optax.adamw) if scheduled else optax.adamw
     return optax.chain(
         optax.clip_by_global_norm(clip_norm),
-        optax.adamw(learning_rate, weight_decay=weight_decay),
+        adamw(learning_rate, weight_decay=weight_decay),
     )
+
+
+def epoch_learning_rate(learning_rate: float, schedule: str, epoch: int, max_epochs: int) -> float:
+    """The learning rate of ``epoch``: constant, or ``"cosine"``: ``lr·(1 + cos(π·epoch/max_epochs))/2``."""
+    if schedule == "cosine":
+        return learning_rate * 0.5 * (1.0 + math.cos(math.pi * epoch / max_epochs))
+    if schedule != "constant":
+        raise ValueError(f"lr_schedule must be 'constant' or 'cosine', got {schedule!r}")
+    return learning_rate
+
+
+def _set_learning_rate(opt_state, value: float):
+    """``opt_state`` of a ``scheduled`` optimiser with its learning rate set (placement kept)."""
+    clip_state, adam_state = opt_state
+    old = adam_state.hyperparams["learning_rate"]
+    new = jax.device_put(jnp.asarray(value, old.dtype), old.sharding)
+    hyper = dict(adam_state.hyperparams, learning_rate=new)
+    return clip_state, adam_state._replace(hyperparams=hyper)
 
 
 def _update(params, static, opt_state, batch, key, loss: AbstractLoss, optimizer):
@@ -136,6 +160,7 @@ def fit(
     round_index: int = 0,
     mesh=None,
     steps_per_call: int = 32,
+    lr_schedule: str = "constant",
 ):
     """Train ``flow`` on ``theta``/``x`` (host arrays); return the best-validation flow and an info dict.
 
@@ -143,7 +168,8 @@ def fit(
     batch axis is sharded over ``mesh`` and the model is replicated. Steps run in compiled
     blocks of exactly ``steps_per_call`` (a ``lax.scan``; the last block of an epoch padded with
     masked no-op steps), so per-step Python dispatch is amortised and the loop is compiled once
-    per loss and batch size, not once per data size.
+    per loss and batch size, not once per data size. ``lr_schedule`` (see
+    `epoch_learning_rate`) sets the learning rate per epoch over ``max_epochs``.
     """
     mesh = data_mesh() if mesh is None else mesh
     ndev = mesh.devices.size
@@ -156,7 +182,9 @@ def fit(
             f"for {ndev} device(s)."
         )
     nb, nvb = tr.size // bsz, va.size // vsz
-    optimizer = make_optimizer(float(learning_rate), float(weight_decay), float(clip_norm))
+    scheduled = lr_schedule != "constant"
+    epoch_learning_rate(learning_rate, lr_schedule, 0, max_epochs)  # checks the name
+    optimizer = make_optimizer(float(learning_rate), float(weight_decay), float(clip_norm), scheduled)
     flow = replicate(flow, mesh)
     opt_state = replicate(init_opt_state(flow, optimizer), mesh)
     key, val_key = jax.random.split(key)
@@ -171,6 +199,9 @@ def fit(
     train_hist, val_hist = [], []
     for epoch in range(max_epochs):
         key, k_perm, k_steps = jax.random.split(key, 3)
+        if scheduled:
+            lr = epoch_learning_rate(learning_rate, lr_schedule, epoch, max_epochs)
+            opt_state = _set_learning_rate(opt_state, lr)
         perm = tr[np.asarray(jax.random.permutation(k_perm, tr.size))][: nb * bsz].reshape(nb, bsz)
         step_keys = jax.random.split(k_steps, nb)
         total = jnp.zeros(())
