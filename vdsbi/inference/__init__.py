@@ -1,4 +1,4 @@
-"""Neural posterior estimation in JAX: spline flows, NPE and APT / SNPE-C."""
+"""Neural posterior estimation in JAX: spline flows, flow matching (FMPE), NPE and APT / SNPE-C."""
 
 from ._apt import (
     APTState as APTState,
@@ -22,6 +22,12 @@ from ._flow import (
     FlowEnsemble as FlowEnsemble,
     flow_from_spec as flow_from_spec,
     trainable_filter as trainable_filter,
+)
+from ._flow_matching import (
+    FlowMatchingEstimator as FlowMatchingEstimator,
+    FlowMatchingLoss as FlowMatchingLoss,
+    VectorField as VectorField,
+    fmpe_from_spec as fmpe_from_spec,
 )
 from ._loss import (
     AbstractLoss as AbstractLoss,

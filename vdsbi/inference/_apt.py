@@ -14,6 +14,7 @@ from jaxtyping import Array, PRNGKeyArray
 
 from ._embeddings import AbstractEmbedding
 from ._flow import ConditionalFlow, FlowEnsemble
+from ._flow_matching import FlowMatchingEstimator, FlowMatchingLoss
 from ._loss import AtomicLoss, MaximumLikelihoodLoss
 from ._posterior import Posterior, _log_prob, _sample
 from ._prior import BoxPrior
@@ -67,6 +68,13 @@ class NPEConfig:
         truncation_epsilon: mass outside the HPD region for ``truncate=True`` (TSNPE).
         truncation_samples: posterior samples used to locate the HPD threshold.
         retrain_from_scratch: re-initialise the flow every round (default: continue training).
+        estimator: ``"nsf"`` (default: the spline flow, fields above) or ``"fmpe"``
+            (`FlowMatchingEstimator`, trained by flow matching; ``theta_map``, ``x_standardize``
+            and the training fields apply, the spline fields do not). FMPE has no atomic loss:
+            amortised NPE (``rounds=1``) or TSNPE (``truncate=True``) only.
+        fmpe_hidden, fmpe_num_blocks: width and residual blocks of FMPE's vector field.
+        fmpe_ode_steps: fixed Tsit5 steps of FMPE's ODE (sampling and ``log_prob``).
+        fmpe_time_power: FMPE training times have density ∝ ``t^fmpe_time_power`` (0: uniform).
     """
 
     num_layers: int = 5
@@ -93,8 +101,17 @@ class NPEConfig:
     truncation_epsilon: float = 1e-4
     truncation_samples: int = 10_000
     retrain_from_scratch: bool = False
+    estimator: Literal["nsf", "fmpe"] = "nsf"
+    fmpe_hidden: int = 128
+    fmpe_num_blocks: int = 3
+    fmpe_ode_steps: int = 10
+    fmpe_time_power: float = 0.0
 
     def __post_init__(self):
+        if self.estimator not in ("nsf", "fmpe"):
+            raise ValueError(f"estimator must be 'nsf' or 'fmpe', got {self.estimator!r}")
+        if self.estimator == "fmpe" and self.ensemble > 1:
+            raise ValueError("ensemble > 1 is implemented for estimator='nsf' only")
         if self.x_standardize not in ("channel", "global", "trajectory", "none"):
             raise ValueError(
                 "x_standardize must be 'channel', 'global', 'trajectory' or 'none', "
@@ -210,6 +227,20 @@ def build_flow(
     theta_standardizer = Standardizer.fit(z, "channel")
 
     def make(k):
+        if config.estimator == "fmpe":
+            return FlowMatchingEstimator(
+                k,
+                prior,
+                embedding,
+                x.shape[1:],
+                hidden=config.fmpe_hidden,
+                num_blocks=config.fmpe_num_blocks,
+                ode_steps=config.fmpe_ode_steps,
+                time_power=config.fmpe_time_power,
+                theta_map=config.theta_map,
+                theta_standardizer=theta_standardizer,
+                x_standardizer=x_standardizer,
+            )
         return ConditionalFlow(
             k,
             prior,
@@ -310,6 +341,8 @@ def apt(
     # and the flow's parameters on one.
     x_o = jnp.asarray(np.asarray(x_o))
     sims = _sims_schedule(sims_per_round, rounds)
+    if config.estimator == "fmpe" and rounds > 1 and not truncate:
+        raise ValueError("estimator='fmpe' has no atomic (APT) loss: use rounds=1 or truncate=True")
     mesh = data_mesh() if mesh is None else mesh
     problem = _Problem(simulate, prior, x_o, embedding, config, truncate, on_epoch_end, mesh)
     if state is None:
@@ -440,7 +473,7 @@ def _train_round(
     if flow is None or config.retrain_from_scratch:
         flow = build_flow(k_init, problem.prior, problem.embedding, theta[~is_val], x[~is_val], config)
     if r == 0 or problem.truncate:
-        loss = MaximumLikelihoodLoss()
+        loss = first_round_loss(config)
     else:
         loss = AtomicLoss(num_atoms=config.num_atoms, combined=config.combined_loss)
     flow, finfo = fit(
@@ -463,6 +496,11 @@ def _train_round(
         lr_schedule=config.lr_schedule,
     )
     return flow, {**finfo, "loss": type(loss).__name__, "patience": patience}
+
+
+def first_round_loss(config: NPEConfig) -> MaximumLikelihoodLoss | FlowMatchingLoss:
+    """The loss on prior (or truncated-prior) draws: maximum likelihood, or flow matching."""
+    return FlowMatchingLoss() if config.estimator == "fmpe" else MaximumLikelihoodLoss()
 
 
 _MIN_PATIENCE = 2

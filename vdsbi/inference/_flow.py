@@ -323,7 +323,7 @@ def _rejection(draw: Callable, prior: BoxPrior, key: PRNGKeyArray, n: int) -> Fl
         pos = count + jnp.cumsum(ok) - 1
         slot = jnp.where(ok & (pos < n), pos, n)  # n: out of range, dropped
         out = out.at[slot].set(cand, mode="drop")
-        return i + 1, jnp.minimum(count + jnp.sum(ok), n), out
+        return i + 1, jnp.minimum(count + jnp.sum(ok, dtype=count.dtype), n), out
 
     def cond(carry):
         i, count, _ = carry
@@ -432,15 +432,14 @@ def _flow_from_spec(spec: dict[str, Any], key: PRNGKeyArray) -> ConditionalFlow:
 
 
 def trainable_filter(flow: ConditionalFlow | FlowEnsemble):
-    """Boolean pytree: True on the trained weights (layers and embedding), False on frozen stats."""
-    spec = jax.tree.map(lambda _: False, flow)
+    """Boolean pytree: True on the trained weights, False on the frozen prior and standardisations.
+
+    Any estimator with the fields ``prior``, ``theta_standardizer`` and ``x_standardizer`` (the
+    spline flow, `FlowMatchingEstimator`): every other inexact array is trained.
+    """
     if isinstance(flow, FlowEnsemble):
+        spec = jax.tree.map(lambda _: False, flow)
         return eqx.tree_at(lambda f: f.members, spec, replace=trainable_filter(flow.members))
-    return eqx.tree_at(
-        lambda f: (f.layers, f.embedding),
-        spec,
-        replace=(
-            jax.tree.map(eqx.is_inexact_array, flow.layers),
-            jax.tree.map(eqx.is_inexact_array, flow.embedding),
-        ),
-    )
+    spec = jax.tree.map(eqx.is_inexact_array, flow)
+    frozen = lambda f: (f.prior, f.theta_standardizer, f.x_standardizer)  # noqa: E731
+    return eqx.tree_at(frozen, spec, replace=jax.tree.map(lambda _: False, frozen(spec)))

@@ -6,10 +6,9 @@ import jax
 import numpy as np
 from jaxtyping import PRNGKeyArray
 
-from ._apt import NPEConfig, build_flow
+from ._apt import NPEConfig, build_flow, first_round_loss
 from ._embeddings import AbstractEmbedding
 from ._flow import ConditionalFlow
-from ._loss import MaximumLikelihoodLoss
 from ._prior import BoxPrior
 from ._train import fit
 
@@ -24,7 +23,8 @@ def npe(
     config: NPEConfig = NPEConfig(),
     mesh=None,
 ) -> tuple[ConditionalFlow, dict[str, Any]]:
-    """Train ``q(θ | x)`` by maximum likelihood on the pairs ``(theta, x)`` (prior draws).
+    """Train ``q(θ | x)`` on the pairs ``(theta, x)`` (prior draws): by maximum likelihood, or
+    by flow matching with ``config.estimator="fmpe"``.
 
     The same estimator as round 1 of :func:`apt`, for a fixed set of simulations (e.g. to
     compare with another toolkit on identical data). A random ``config.validation_fraction`` of
@@ -47,7 +47,7 @@ def npe(
         x,
         np.ones(m, bool),
         is_val,
-        MaximumLikelihoodLoss(),
+        first_round_loss(config),
         batch_size=config.batch_size,
         learning_rate=config.learning_rate,
         weight_decay=config.weight_decay,

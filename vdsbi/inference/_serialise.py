@@ -10,6 +10,7 @@ import equinox as eqx
 import numpy as np
 
 from ._flow import ConditionalFlow, flow_from_spec
+from ._flow_matching import fmpe_from_spec
 
 FORMAT_VERSION = 1
 
@@ -21,7 +22,9 @@ def flow_to_bytes(flow: ConditionalFlow) -> np.ndarray:
 
 
 def flow_from_bytes(spec: dict[str, Any], data: np.ndarray) -> ConditionalFlow:
-    return eqx.tree_deserialise_leaves(io.BytesIO(np.asarray(data, np.uint8).tobytes()), flow_from_spec(spec))
+    """The estimator (spline flow, ensemble or `FlowMatchingEstimator`) described by ``spec``."""
+    skeleton = fmpe_from_spec(spec) if spec.get("estimator") == "fmpe" else flow_from_spec(spec)
+    return eqx.tree_deserialise_leaves(io.BytesIO(np.asarray(data, np.uint8).tobytes()), skeleton)
 
 
 def write_npz(path, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
