@@ -301,3 +301,43 @@ def test_ensemble_members_are_trained_independently_at_once(getkey):
         for i, m in enumerate(members)
     )
     assert len({round(m, 4) for m in members}) == 3
+
+
+def test_eval_steps_ignores_padding_batches(getkey):
+    # padding batches (live=False; skipped since s7) cannot change the validation loss
+    from vdsbi.inference import eval_steps
+
+    theta, x, flow, _ = _tiny_problem(getkey, 128)
+    batches = tuple(a.reshape(4, 32, *a.shape[1:]) for a in (theta, x, np.ones(128, bool)))
+    live = np.array([True, True, False, False])
+    junk = tuple(
+        np.concatenate([b[:2], np.full_like(b[2:], np.nan if b.dtype != bool else True)]) for b in batches
+    )
+    loss, key = MaximumLikelihoodLoss(), getkey()
+    want = np.mean([float(loss(flow, *(b[i] for b in batches), key)) for i in range(2)])
+    np.testing.assert_allclose(float(eval_steps(flow, junk, key, loss, live)), want, rtol=1e-5)
+    np.testing.assert_allclose(
+        float(eval_steps(flow, batches, key, loss)),
+        np.mean([float(loss(flow, *(b[i] for b in batches), key)) for i in range(4)]),
+        rtol=1e-5,
+    )
+
+
+def test_build_flow_weights_equal_the_op_by_op_build(getkey):
+    # the initialisation is compiled with CPU-specific XLA options; the weights must be the
+    # ones the plain program gives, bit for bit
+    import equinox as eqx
+
+    import vdsbi.inference._apt as apt_module
+
+    theta, x, flow, _ = _tiny_problem(getkey, 64)
+    key = getkey()
+    got = build_flow(key, flow.prior, IdentityEmbedding(2), theta, x, TINY)
+    orig = apt_module._init_compiled
+    try:
+        apt_module._init_compiled = lambda make, k: eqx.filter_jit(make)(k)
+        want = build_flow(key, flow.prior, IdentityEmbedding(2), theta, x, TINY)
+    finally:
+        apt_module._init_compiled = orig
+    assert jax.tree.structure(got) == jax.tree.structure(want)
+    assert tree_allclose(got, want, rtol=0, atol=0)

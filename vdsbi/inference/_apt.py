@@ -21,7 +21,7 @@ from ._prior import BoxPrior
 from ._serialise import FORMAT_VERSION, flow_from_bytes, flow_to_bytes, read_npz, write_npz
 from ._sharding import data_mesh
 from ._standardize import Standardizer
-from ._train import fit
+from ._train import _CPU_OPTIONS, fit
 
 
 @dataclasses.dataclass(frozen=True)
@@ -258,11 +258,24 @@ def build_flow(
             x_standardizer=x_standardizer,
         )
 
-    # One compiled program: built op by op, the initialisation compiled dozens of small
-    # kernels (~2-5 s of a 10⁴-simulation NPE run).
     if config.ensemble > 1:  # members share the embedding's initial weights, not the flows'
-        return eqx.filter_jit(lambda k: FlowEnsemble(make, jax.random.split(k, config.ensemble)))(key)
-    return eqx.filter_jit(make)(key)
+        return _init_compiled(lambda k: FlowEnsemble(make, jax.random.split(k, config.ensemble)), key)
+    return _init_compiled(make, key)
+
+
+def _init_compiled(make: Callable[[PRNGKeyArray], Any], key: PRNGKeyArray):
+    """``make(key)`` as one compiled program (on the CPU at XLA optimisation level 1).
+
+    Built op by op, the initialisation compiled dozens of small kernels (~2-5 s of a
+    10⁴-simulation NPE run); as one program at the CPU's default level its threefry draws
+    still took ~1.5 s to compile for a program that runs once. Level 1 gives the same weights
+    bit for bit in about half the time (``benchmarks/results/train_profile.md``).
+    """
+    options = _CPU_OPTIONS if jax.default_backend() == "cpu" else None
+    arrays = jax.jit(lambda k: eqx.filter(make(k), eqx.is_array), compiler_options=options)(key)
+    shapes = eqx.filter_eval_shape(make, key)
+    static = eqx.filter(shapes, lambda a: isinstance(a, jax.ShapeDtypeStruct), inverse=True)
+    return eqx.combine(arrays, static)
 
 
 def _truncated_prior(key, flow, prior, x_o, n, config) -> tuple[Array, dict]:
