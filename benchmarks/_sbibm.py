@@ -73,13 +73,17 @@ def c2st(
 ) -> float:
     """sbibm's C2ST accuracy (see the module docstring); 0.5 = indistinguishable.
 
-    ``n_jobs`` > 1 fits the folds in parallel processes (``cross_val_score``'s own option, not
-    in sbibm's call): every fold's classifier is a clone with ``random_state=seed`` on the same
-    split, so the folds' scores are the same as with ``n_jobs=1`` (checked bit for bit on this
-    machine, see the sbibm-tasks note in the README); only the wall time changes.
+    BLAS runs on one thread: the MLP's float rounding depends on the BLAS thread count, and
+    hundreds of Adam epochs amplify it (10-d gaussian_linear_uniform, 2 threads vs 1: fold
+    accuracies apart by up to 0.03), so one thread makes the figure independent of the
+    machine. ``n_jobs`` > 1 fits the folds in parallel processes (``cross_val_score``'s own
+    option, not in sbibm's call), each on one BLAS thread: same classifier, folds and data, so
+    the same fold scores as ``n_jobs=1``; only the wall time changes.
     """
+    from joblib import parallel_config
     from sklearn.model_selection import KFold, cross_val_score
     from sklearn.neural_network import MLPClassifier
+    from threadpoolctl import threadpool_limits
 
     X, Y = np.asarray(reference, np.float32), np.asarray(samples, np.float32)
     mean, std = X.mean(0), X.std(0, ddof=1)
@@ -95,5 +99,6 @@ def c2st(
     data = np.concatenate((X, Y))
     target = np.concatenate((np.zeros((X.shape[0],)), np.ones((Y.shape[0],))))
     shuffle = KFold(n_splits=n_folds, shuffle=True, random_state=seed)
-    scores = cross_val_score(clf, data, target, cv=shuffle, scoring="accuracy", n_jobs=n_jobs)
+    with threadpool_limits(1), parallel_config(backend="loky", inner_max_num_threads=1):
+        scores = cross_val_score(clf, data, target, cv=shuffle, scoring="accuracy", n_jobs=n_jobs)
     return float(np.asarray(np.mean(scores)).astype(np.float32))
