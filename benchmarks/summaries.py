@@ -1,18 +1,21 @@
 """Handcrafted statistics vs the 1D-CNN embedding, and SBC calibration of the amortized posterior.
 
-    python benchmarks/summaries.py [--quick] [--sims N] [--test N]
+    python benchmarks/summaries.py [--quick] [--sims N] [--test N] [--lr-schedule cosine] ...
 
 Both estimators are amortized (one NPE round on prior simulations, the same simulations for
 both), then evaluated on held-out (θ, x) pairs from the prior: per parameter the RMSE of the
 posterior mean, the mean posterior std, the 90 % coverage; SBC ranks with KS p-values and
-expected coverage at 50/80/95 %. Writes benchmarks/results/summaries.json (+ .md) and
+expected coverage at 50/80/95 %. Training uses the vehicle's `IdentifySettings` config (the one
+Table II uses) unless options override it. Writes benchmarks/results/summaries.json (+ .md) and
 experiments/results/calibration.json (+ calibration_<embedding>.png).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+import os
 import time
 from pathlib import Path
 
@@ -21,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from vdsbi.diagnostics import expected_coverage, sbc_ks_pvalues, sbc_ranks
-from vdsbi.inference import IdentifySettings, NPEConfig, identify, observation, seed_prior
+from vdsbi.inference import IdentifySettings, identify, observation, seed_prior
 from vdsbi.simulator import (
     PARAM_NAMES,
     SEED_CHANNELS,
@@ -64,15 +67,19 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--sims", type=int, default=None)
-    ap.add_argument("--test", type=int, default=None, help="held-out simulations (≥ 200 for SBC)")
+    ap.add_argument("--test", type=int, default=None, help="held-out simulations (default 500)")
     ap.add_argument("--posterior-samples", type=int, default=500)
     ap.add_argument("--embeddings", default="stats,cnn")
-    ap.add_argument("--max-epochs", type=int, default=40)
-    ap.add_argument("--patience", type=int, default=6)
+    # training overrides; None keeps IdentifySettings' config
+    ap.add_argument("--max-epochs", type=int, default=None)
+    ap.add_argument("--patience", type=int, default=None)
+    ap.add_argument("--lr-schedule", choices=("constant", "cosine"), default=None)
+    ap.add_argument("--ensemble", type=int, default=None)
+    ap.add_argument("--theta-map", choices=("logit", "affine"), default=None)
     ap.add_argument("--tag", default="", help="suffix for the output files")
     args = ap.parse_args(argv)
     n_sims = args.sims or (400 if args.quick else 5000)
-    n_test = args.test or (20 if args.quick else 200)
+    n_test = args.test or (20 if args.quick else 500)
     n_post = 100 if args.quick else args.posterior_samples
     out_b = ROOT / "benchmarks" / "results"
     out_e = ROOT / "experiments" / "results"
@@ -97,8 +104,25 @@ def main(argv=None):
     sim_test_s = time.perf_counter() - t0
     ok_test = np.asarray(ok_test)
     u = jnp.stack([inputs.steer, inputs.torque_front, inputs.torque_rear], -1).astype(jnp.float32)
+    overrides = {
+        "max_epochs": 10 if args.quick else args.max_epochs,
+        "patience": args.patience,
+        "lr_schedule": args.lr_schedule,
+        "ensemble": args.ensemble,
+        "theta_map": args.theta_map,
+    }
+    config = dataclasses.replace(
+        IdentifySettings().config, **{k: v for k, v in overrides.items() if v is not None}
+    )
     results = {
-        "settings": {"sims": n_sims, "test": n_test, "posterior_samples": n_post, "rounds": 1},
+        "settings": {
+            "sims": n_sims,
+            "test": n_test,
+            "posterior_samples": n_post,
+            "rounds": 1,
+            "config": dataclasses.asdict(config),
+        },
+        "load_average_at_start": os.getloadavg()[0],
         "embeddings": {},
     }
     calib = {}
@@ -109,12 +133,7 @@ def main(argv=None):
             sims_per_round=n_sims,
             embedding=emb,
             num_samples=n_post,
-            config=NPEConfig(
-                batch_size=256,
-                learning_rate=1e-3,
-                max_epochs=args.max_epochs if not args.quick else 10,
-                patience=args.patience,
-            ),
+            config=config,
         )
         t0 = time.perf_counter()
         posterior, _, state = identify(k_train, simulator, prior, ys_test[0], settings)
@@ -140,6 +159,7 @@ def main(argv=None):
             "mean_std": dict(zip(PARAM_NAMES, std.tolist())),
             "coverage_90": dict(zip(PARAM_NAMES, cov[LEVELS.index(0.9)].tolist())),
             "epochs": [h["epochs"] for h in state.history],
+            "best_epoch": [h["best_epoch"] for h in state.history],
             "wall_s": {"training_incl_simulation": train_s, "sampling": sample_s},
             "units": "l_f, h_cog in m; stiffness in 1e5 N or N/rad",
         }

@@ -65,6 +65,10 @@ def main(argv=None) -> dict:
     ap.add_argument("--sims", type=int, default=None)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=RESULTS)
+    # training overrides for experiments (None keeps IdentifySettings' config)
+    ap.add_argument("--max-epochs", type=int, default=None)
+    ap.add_argument("--patience", type=int, default=None)
+    ap.add_argument("--lr-schedule", choices=("constant", "cosine"), default=None)
     args = ap.parse_args(argv)
     rounds = args.rounds or (2 if args.quick else 5)
     sims = args.sims or (200 if args.quick else 5000)
@@ -88,6 +92,9 @@ def main(argv=None) -> dict:
     assert bool(ok[0]), "the observation failed to simulate"
     prior = seed_prior(literal=args.literal_prior)
     settings = IdentifySettings(rounds=rounds, sims_per_round=sims, embedding=args.embedding)
+    overrides = {"max_epochs": args.max_epochs, "patience": args.patience, "lr_schedule": args.lr_schedule}
+    overrides = {k: v for k, v in overrides.items() if v is not None}
+    settings = dataclasses.replace(settings, config=dataclasses.replace(settings.config, **overrides))
     if args.quick:
         settings = dataclasses.replace(
             settings, config=dataclasses.replace(settings.config, max_epochs=15, patience=4)
@@ -135,8 +142,11 @@ def main(argv=None) -> dict:
             "seed": args.seed,
             "prior": {n: [float(lo[i]), float(hi[i])] for i, n in enumerate(PARAM_NAMES)},
             "patience_unit": settings.config.patience_unit,
+            "config": dataclasses.asdict(settings.npe_config),
         },
         "load_average_at_start": load_start,
+        # 1-, 5-, 15-minute load at the end: other work on the 2 cores slows the run
+        "load_average_at_end": list(os.getloadavg()),
         "num_invalid_simulations": int(state.num_invalid),
         "rounds": [
             {k: v for k, v in h.items() if k not in ("train_losses", "val_losses")} | {"traces": t}
@@ -180,7 +190,8 @@ def main(argv=None) -> dict:
         f"Wall time: simulation {timing['simulation']:.0f} s, training {timing['training']:.0f} s, "
         f"sampling {timing['sampling']:.1f} s, total {timing['total']:.0f} s "
         f"(target ≤ {TARGET_S} s: {'met' if timing['total'] <= TARGET_S else '**missed**'}); "
-        f"load average at start {load_start:.2f}.",
+        f"load average at start {load_start:.2f}, at end {os.getloadavg()[0]:.2f} (1 min) / "
+        f"{os.getloadavg()[1]:.2f} (5 min).",
         f"Invalid simulations excluded: {state.num_invalid}.",
         "",
         "| round | loss | epochs | best epoch | patience | wall s | step traces so far |",
