@@ -1,5 +1,6 @@
 """Amortised NPE on simulations the caller already has (no simulator, no rounds)."""
 
+from collections.abc import Callable
 from typing import Any
 
 import jax
@@ -22,6 +23,7 @@ def npe(
     embedding: AbstractEmbedding,
     config: NPEConfig = NPEConfig(),
     mesh=None,
+    on_epoch_end: Callable[[int, int, float, float], None] | None = None,
 ) -> tuple[ConditionalFlow, dict[str, Any]]:
     """Train ``q(θ | x)`` on the pairs ``(theta, x)`` (prior draws): by maximum likelihood, or
     by flow matching with ``config.estimator="fmpe"``.
@@ -29,7 +31,8 @@ def npe(
     The same estimator as round 1 of :func:`apt`, for a fixed set of simulations (e.g. to
     compare with another toolkit on identical data). A random ``config.validation_fraction`` of
     the pairs is held out for early stopping. Returns ``(flow, info)``; wrap the flow in a
-    :class:`Posterior` to sample at an observation.
+    :class:`Posterior` to sample at an observation. ``on_epoch_end(0, epoch, train_loss,
+    val_loss)`` is called after every epoch (progress, profiling).
     """
     theta, x = np.asarray(theta, np.float32), np.asarray(x, np.float32)
     if theta.ndim != 2 or theta.shape[1] != prior.dim or x.shape[0] != theta.shape[0]:
@@ -56,4 +59,5 @@ def npe(
         patience=config.patience,
         mesh=mesh,
         lr_schedule=config.lr_schedule,
+        on_epoch_end=on_epoch_end,
     )
