@@ -11,20 +11,26 @@ simulators of the sbibm tasks, fixed seed); sbi's ``NPE(density_estimator="nsf")
 ``benchmarks/sbi_tasks.py``), are trained on them. Both are amortised: one network per cell,
 sampled at sbibm's observations 1..n (``--n-obs``) and scored against sbibm's reference
 posterior samples with sbibm's C2ST (scikit-learn MLP, 5-fold). ``*_train_s`` is the training
-wall time (ours includes JIT compilation); sampling and C2ST are not timed.
+wall time (ours includes JIT compilation in a fresh process, no persistent compilation cache;
+``ours_compile_s`` is the part of it spent tracing, lowering and compiling, from JAX's
+monitoring events); sampling and C2ST are not timed. Each cell records the 1-minute load average
+before each side's training and the commit. ``--force`` re-runs named cells (sbi's side too:
+its time varies with the machine's load, so both sides run in the same process, back to back).
 
 Ours uses ``theta_map="affine"`` (the flow on θ, as sbi) since the s6 session; the table with the
 library's default logit map is kept in ``benchmarks/results/vs_sbi_logit.{json,md}`` and the
 seed-to-seed screening behind the change in ``vs_sbi_variants.jsonl``.
 
 Writes ``benchmarks/results/vs_sbi.json`` after every cell (finished cells are skipped on a
-re-run), and the table to ``benchmarks/results/vs_sbi.md``.
+re-run), and the table to ``benchmarks/results/vs_sbi.md``. The cells before the s7 speed work
+(commit 54b14e0^) are kept in ``benchmarks/results/vs_sbi_s6.{json,md}``.
 """
 
 import argparse
 import dataclasses
 import json
 import os
+import subprocess
 import sys
 import time
 
@@ -74,19 +80,33 @@ def train_sbi(task, theta, x, seed):
     return sample, train_s
 
 
+_COMPILE_EVENTS = (
+    "/jax/core/compile/jaxpr_trace_duration",
+    "/jax/core/compile/jaxpr_to_mlir_module_duration",
+    "/jax/core/compile/backend_compile_duration",
+)
+_COMPILE_S: list = []  # seconds of every tracing, lowering and XLA compilation since cleared
+jax.monitoring.register_event_duration_secs_listener(
+    lambda event, secs, **_: _COMPILE_S.append(secs) if event in _COMPILE_EVENTS else None
+)
+
+
 def train_ours(task, theta, x, budget, seed):
+    """Ours; returns a sampler, training seconds, epochs and the seconds of them spent compiling."""
     key = jax.random.key(seed)
+    _COMPILE_S.clear()
     t0 = time.perf_counter()
     flow, info = npe(
         key, task.prior, theta, x, embedding=IdentityEmbedding(task.dim_x), config=config_for(budget)
     )
     jax.block_until_ready(flow)
     train_s = time.perf_counter() - t0
+    compile_s = sum(_COMPILE_S)
 
     def sample(x_o, n):
         return np.asarray(Posterior(flow, x_o).sample(jax.random.fold_in(key, 7), n))
 
-    return sample, train_s, info["epochs"]
+    return sample, train_s, info["epochs"], compile_s
 
 
 def run_cell(task_name, budget, n_obs, num_samples, seed):
@@ -94,10 +114,15 @@ def run_cell(task_name, budget, n_obs, num_samples, seed):
 
     task = get_task(task_name)
     theta, x = simulations(task, budget, seed)
+    load_sbi = os.getloadavg()[0]
     sbi_sample, sbi_s = train_sbi(task, theta, x, seed)
-    print(f"  sbi trained in {sbi_s:.1f} s", flush=True)
-    ours_sample, ours_s, epochs = train_ours(task, theta, x, budget, seed)
-    print(f"  ours trained in {ours_s:.1f} s ({epochs} epochs)", flush=True)
+    print(f"  sbi trained in {sbi_s:.1f} s (load {load_sbi:.2f})", flush=True)
+    load_ours = os.getloadavg()[0]
+    ours_sample, ours_s, epochs, compile_s = train_ours(task, theta, x, budget, seed)
+    print(
+        f"  ours trained in {ours_s:.1f} s ({epochs} epochs, {compile_s:.1f} s compiling, load {load_ours:.2f})",
+        flush=True,
+    )
     ours, theirs = [], []
     for i in range(1, n_obs + 1):
         x_o, ref = _sbibm.observation(task_name, i), _sbibm.reference_posterior_samples(task_name, i)
@@ -115,22 +140,40 @@ def run_cell(task_name, budget, n_obs, num_samples, seed):
         "ours_c2st_per_obs": ours,
         "sbi_c2st_per_obs": theirs,
         "ours_epochs": epochs,
+        "ours_compile_s": compile_s,
+        "load_sbi": load_sbi,
+        "load_ours": load_ours,
+        "commit": _commit(),
         "ours_config": dataclasses.asdict(config_for(budget)),
         "n_obs": n_obs,
         "torch_threads": torch.get_num_threads(),
     }
 
 
+def _commit() -> str:
+    """HEAD's short hash, ``+dirty`` when the package has uncommitted changes."""
+    git = ["git", "-C", HERE]
+    head = subprocess.run(
+        [*git, "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+    ).stdout.strip()
+    dirty = subprocess.run([*git, "status", "--porcelain", "--", "../vdsbi"], capture_output=True, text=True)
+    return head + ("+dirty" if dirty.stdout.strip() else "")
+
+
 def table(cells) -> str:
     lines = [
-        "| task | budget | ours C2ST | sbi C2ST | ours train s | sbi train s | sbi/ours time |",
-        "|---|---|---|---|---|---|---|",
+        "| task | budget | ours C2ST | sbi C2ST | ours train s (compiling) | sbi train s | sbi/ours time "
+        "| load sbi/ours | commit |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for c in cells:
         mark = "✓" if c["ours_c2st"] <= c["sbi_c2st"] else "✗"
+        comp = f" ({c['ours_compile_s']:.1f})" if "ours_compile_s" in c else ""
+        load = f"{c['load_sbi']:.1f}/{c['load_ours']:.1f}" if "load_sbi" in c else "–"
         lines.append(
             f"| {c['task']} | {c['budget']:.0e} | {c['ours_c2st']:.3f} {mark} | {c['sbi_c2st']:.3f} "
-            f"| {c['ours_train_s']:.1f} | {c['sbi_train_s']:.1f} | {c['speedup']:.1f}× |"
+            f"| {c['ours_train_s']:.1f}{comp} | {c['sbi_train_s']:.1f} | {c['speedup']:.1f}× "
+            f"| {load} | {c.get('commit', '–')} |"
         )
     return "\n".join(lines)
 
@@ -144,16 +187,19 @@ def main():
     ap.add_argument("--num-samples", type=int, default=10_000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=os.path.join(HERE, "results", "vs_sbi.json"))
+    ap.add_argument("--force", action="store_true", help="re-run the named cells (replace them)")
     args = ap.parse_args()
     if args.quick:
         args.tasks, args.budgets, args.n_obs, args.num_samples = ["two_moons"], [1_000], 1, 2_000
     cells = [] if args.quick or not os.path.exists(args.out) else json.load(open(args.out))["cells"]
     for budget in args.budgets:
         for name in args.tasks:
-            if any(c["task"] == name and c["budget"] == budget for c in cells):
+            same = [c["task"] == name and c["budget"] == budget for c in cells]
+            if any(same) and not args.force:
                 continue
             print(f"cell {name} {budget}", flush=True)
-            cells.append(run_cell(name, budget, args.n_obs, args.num_samples, args.seed))
+            cell = run_cell(name, budget, args.n_obs, args.num_samples, args.seed)
+            cells = [c for c, s in zip(cells, same) if not s] + [cell]
             print(table(cells), flush=True)
             if not args.quick:
                 _save(args.out, cells)

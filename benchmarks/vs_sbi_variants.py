@@ -116,6 +116,7 @@ def main():
             "train_s": train_s,
             "epochs": epochs,
             "load": os.getloadavg()[0],
+            "commit": vs_sbi._commit(),
         }
         print(json.dumps(rec), flush=True)
         with open(args.out, "a") as f:

@@ -341,3 +341,20 @@ def test_build_flow_weights_equal_the_op_by_op_build(getkey):
         apt_module._init_compiled = orig
     assert jax.tree.structure(got) == jax.tree.structure(want)
     assert tree_allclose(got, want, rtol=0, atol=0)
+
+
+def test_npe_on_a_new_data_size_reuses_the_compiled_loops(getkey):
+    # steps run in fixed-length padded blocks and validation in padded blocks (compiled on a
+    # worker thread): a second NPE on more simulations traces neither loop again
+    from vdsbi.inference import npe
+
+    prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
+    cfg = dataclasses.replace(TINY, max_epochs=2)
+    names = ("train_steps", "eval_steps")
+    for n in (400, 520):
+        theta = np.asarray(prior.sample(getkey(), n))
+        x = np.asarray(_gauss_sim(getkey(), theta)[0])
+        before = {k: TRACE_COUNTS[k] for k in names}
+        npe(getkey(), prior, theta, x, embedding=IdentityEmbedding(2), config=cfg)
+        new = [TRACE_COUNTS[k] - before[k] for k in names]
+        assert max(new) <= 1 if n == 400 else new == [0, 0]
