@@ -247,7 +247,8 @@ def test_later_rounds_wait_for_their_new_data_only(unit, getkey):
 def test_cosine_schedule_runs_its_course_without_recompiling(getkey):
     # The learning rate lives in the optimiser state: a new value every epoch reuses the
     # compiled step. A round that ran its whole cosine schedule counts as converged, so the
-    # next round scales its patience as after an early stop.
+    # next round scales its patience as after an early stop; that round continues the trained
+    # flow at the constant rate.
     prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
     cfg = dataclasses.replace(TINY, max_epochs=4, patience=6, lr_schedule="cosine")
     before = TRACE_COUNTS["train_steps"]
@@ -257,6 +258,7 @@ def test_cosine_schedule_runs_its_course_without_recompiling(getkey):
     first, second = state.history
     assert first["epochs"] == 4  # patience 6 > 4 epochs: no early stop
     assert second["patience"] == 3  # ceil(6 / 2), not the full 6 of an unconverged round
+    assert (first["lr_schedule"], second["lr_schedule"]) == ("cosine", "constant")
     with pytest.raises(ValueError, match="lr_schedule"):
         NPEConfig(lr_schedule="step")
 
