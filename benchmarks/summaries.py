@@ -111,16 +111,18 @@ def main(argv=None):
         "ensemble": args.ensemble,
         "theta_map": args.theta_map,
     }
-    config = dataclasses.replace(
-        IdentifySettings().config, **{k: v for k, v in overrides.items() if v is not None}
-    )
+    overrides = {k: v for k, v in overrides.items() if v is not None}
+    configs = {  # each embedding's IdentifySettings default, with the overrides
+        emb: dataclasses.replace(IdentifySettings(embedding=emb).config, **overrides)
+        for emb in args.embeddings.split(",")
+    }
     results = {
         "settings": {
             "sims": n_sims,
             "test": n_test,
             "posterior_samples": n_post,
             "rounds": 1,
-            "config": dataclasses.asdict(config),
+            "config": {emb: dataclasses.asdict(c) for emb, c in configs.items()},
         },
         "load_average_at_start": os.getloadavg()[0],
         "embeddings": {},
@@ -133,7 +135,7 @@ def main(argv=None):
             sims_per_round=n_sims,
             embedding=emb,
             num_samples=n_post,
-            config=config,
+            config=configs[emb],
         )
         t0 = time.perf_counter()
         posterior, _, state = identify(k_train, simulator, prior, ys_test[0], settings)

@@ -108,6 +108,17 @@ def test_seed_prior_is_physical():
     assert float(literal.low[2]) < 0 and float(literal.high[0]) == 1.5
 
 
+def test_identify_settings_train_each_embedding_by_its_own_default():
+    from vdsbi.inference import IdentifySettings, NPEConfig
+
+    cnn, stats = IdentifySettings(embedding="cnn"), IdentifySettings(embedding="stats")
+    # the CNN's round 1 runs a fixed decaying schedule; the cheap statistics keep early stopping
+    assert cnn.config.lr_schedule == "cosine" and stats.config.lr_schedule == "constant"
+    assert cnn.npe_config.x_standardize == "trajectory"
+    mine = NPEConfig(max_epochs=7)
+    assert IdentifySettings(embedding="cnn", config=mine).config is mine  # an explicit one is kept
+
+
 @pytest.mark.slow
 def test_paper_table2_quick_recovers_l_f(tmp_path):
     from experiments.paper_table2 import main

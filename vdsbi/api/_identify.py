@@ -207,7 +207,7 @@ def _settings(rounds, sims, embedding, epochs, num_samples):
     """`IdentifySettings` (which checks them) with `epochs` as the training's epoch limit."""
     from ..inference import IdentifySettings
 
-    base = IdentifySettings()
+    base = IdentifySettings(embedding=embedding)  # the embedding's own training default
     cfg = base.config if epochs is None else dataclasses.replace(base.config, max_epochs=int(epochs))
     return IdentifySettings(
         rounds=int(rounds),

@@ -17,6 +17,16 @@ from ._posterior import Posterior
 from ._prior import BoxPrior
 from ._summaries import summary_statistics
 
+#: Training for the statistics' MLP: constant rate, early stopping (an epoch costs ~0.5 s).
+STATS_CONFIG = NPEConfig(batch_size=256, learning_rate=1e-3, max_epochs=40, patience=6)
+#: Training for the CNN: round 1 (a fresh flow) on a 20-epoch cosine schedule, later rounds at
+#: the constant rate with early stopping. With a constant rate round 1's early stop moved with
+#: float rounding (epoch 39 vs 26 in two Table II runs: 312 vs 287 s, and the shorter one left
+#: a worse posterior); 20 cosine epochs are a fixed budget, and the amortised posterior they
+#: give passes SBC at 500 held-out sets where 30 and 40 epochs are overconfident on C_alpha_r
+#: and C_kappa_f (benchmarks/summaries.py, README "calibration").
+CNN_CONFIG = NPEConfig(batch_size=256, learning_rate=1e-3, max_epochs=20, patience=6, lr_schedule="cosine")
+
 
 @dataclasses.dataclass(frozen=True)
 class IdentifySettings:
@@ -30,9 +40,10 @@ class IdentifySettings:
         embed_dim: embedding size.
         num_samples: posterior samples to return.
         truncate: TSNPE proposals instead of the atomic loss.
-        config: flow and training hyperparameters; its ``x_standardize`` is overridden by
-            `npe_config` for the CNN (see there). Later rounds wait ``ceil(patience · new/all)``
-            epochs (``patience_unit="new_data"``), as for the other tasks.
+        config: flow and training hyperparameters (default: `CNN_CONFIG` or `STATS_CONFIG`
+            for the embedding); its ``x_standardize`` is overridden by `npe_config` for the CNN
+            (see there). Later rounds wait ``ceil(patience · new/all)`` epochs
+            (``patience_unit="new_data"``), as for the other tasks.
     """
 
     rounds: int = 5
@@ -41,7 +52,7 @@ class IdentifySettings:
     embed_dim: int = 32
     num_samples: int = 1000
     truncate: bool = False
-    config: NPEConfig = NPEConfig(batch_size=256, learning_rate=1e-3, max_epochs=40, patience=6)
+    config: NPEConfig | None = None
 
     @property
     def npe_config(self) -> NPEConfig:
@@ -56,6 +67,9 @@ class IdentifySettings:
     def __post_init__(self):
         if self.embedding not in ("cnn", "stats"):
             raise InputError("settings", "embedding", f"must be 'cnn' or 'stats', got {self.embedding!r}")
+        if self.config is None:  # the embedding's own training default
+            default = CNN_CONFIG if self.embedding == "cnn" else STATS_CONFIG
+            object.__setattr__(self, "config", default)
         if self.rounds < 1:
             raise InputError("settings", "rounds", f"must be >= 1, got {self.rounds}")
         if self.sims_per_round < 10:
