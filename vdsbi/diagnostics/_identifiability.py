@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -40,6 +41,19 @@ def filtered_noise_rho(problem: Problem) -> float:
     h = np.asarray(problem.decimator.taps)
     d = problem.decimator.factor
     return float(np.dot(h[d:], h[:-d]) / np.dot(h, h)) if d < len(h) else 0.0
+
+
+@eqx.filter_jit
+def _readings_and_jacobian(wm, theta, scale, effect_params):
+    """Compared readings at θ and their Jacobian (W, K, C, P) in prior-width units: one compiled
+    forward-mode pass (run op by op, the simulation was compiled twice per call)."""
+
+    def compared(u):
+        ys, _ = wm(theta + u * scale, effect_params)
+        return ys, ys
+
+    jac, ys = jax.jacfwd(compared, has_aux=True)(jnp.zeros_like(theta))
+    return ys, jac
 
 
 def identifiability(
@@ -71,14 +85,9 @@ def identifiability(
     scale = hi - lo  # work in prior-width units so the matrix is well conditioned
     theta = np.asarray(theta, dtype=float)
 
-    def compared(u):
-        ys, _ = wm(jnp.asarray(theta) + u * scale, effect_params)
-        return ys
-
-    u0 = jnp.zeros(len(PARAM_NAMES))
-    jac = jax.jacfwd(compared)(u0)  # (W, K, C, P)
+    ys, jac = _readings_and_jacobian(wm, jnp.asarray(theta), jnp.asarray(scale), effect_params)
     mask = np.asarray(train.train)
-    resid = (np.asarray(compared(u0)) - train.y)[mask] / train.sigma  # (N, C)
+    resid = (np.asarray(ys) - train.y)[mask] / train.sigma  # (N, C)
     # Quasi-likelihood: where the model misses by more than the noise at θ, the residual's
     # own scale is the noise the information is measured against.
     inflation = np.maximum(1.0, np.mean(resid**2, axis=0))
