@@ -106,12 +106,14 @@ def _provenance():
 
     def git(*a):
         r = subprocess.run(["git", *a], cwd=HERE, capture_output=True, text=True)
-        return r.stdout.strip() if r.returncode == 0 else None
+        return r.stdout.rstrip() if r.returncode == 0 else None
 
     d = jax.devices()[0]
     return {
         "commit": git("rev-parse", "--short", "HEAD"),
-        "dirty": (git("status", "--porcelain", "--", "../vdsbi", ".") or "").splitlines(),
+        "dirty": (
+            git("status", "--porcelain", "--untracked-files=no", "--", "../vdsbi", ".") or ""
+        ).splitlines(),
         "device": f"{d.platform}:{d.device_kind}",
         "loadavg": [round(v, 2) for v in os.getloadavg()],
         "utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
