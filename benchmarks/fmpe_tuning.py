@@ -16,6 +16,7 @@ JSON line per variant to ``benchmarks/results/fmpe_tuning.jsonl``.
 """
 
 import argparse
+import copy
 import json
 import os
 import sys
@@ -56,6 +57,9 @@ def main():
     ap.add_argument("--seed", type=int, default=0, help="training seed")
     ap.add_argument("--sim-seed", type=int, default=0)
     ap.add_argument("--test", type=int, default=2000, help="fresh simulations scored")
+    ap.add_argument(
+        "--eval-steps", nargs="*", type=int, default=[], help="also score with these ODE step counts"
+    )
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", default=OUT)
     args = ap.parse_args()
@@ -73,6 +77,11 @@ def main():
     jax.block_until_ready(flow)
     train_s = time.perf_counter() - t0
     nll = np.asarray(_nll(flow, jnp.asarray(theta_t), jnp.asarray(x_t)))
+    by_steps = {}
+    for steps in args.eval_steps:  # the same network integrated more finely (FMPE only)
+        other = copy.copy(flow)
+        object.__setattr__(other, "ode_steps", steps)
+        by_steps[steps] = float(np.mean(np.asarray(_nll(other, jnp.asarray(theta_t), jnp.asarray(x_t)))))
     post = Posterior(flow)
     t0 = time.perf_counter()
     jax.block_until_ready(post.sample(jax.random.key(1), 10_000, x=x_t[0]))
@@ -84,6 +93,7 @@ def main():
         "seed": args.seed,
         "test_nll": float(np.mean(nll)),
         "test_nll_se": float(np.std(nll) / np.sqrt(nll.size)),
+        "test_nll_by_ode_steps": by_steps,
         "train_s": train_s,
         "sample_10k_s": time.perf_counter() - t0,
         "epochs": info["epochs"],
