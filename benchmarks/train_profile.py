@@ -11,7 +11,8 @@ hold of the heavy-job lock) and the NPE table is written to ``train_profile.md``
 records the commit, the load average and the device.
 
 ``--npe TASK:BUDGET``: one `npe` fit with ``sbi_tasks.config_for(BUDGET)`` on the simulations of
-``benchmarks/vs_sbi.py`` (the same cell, seed 0), timed as ``vs_sbi.py`` times it. Compilation
+``benchmarks/vs_sbi.py`` (the same cell, seed 0), timed as ``vs_sbi.py`` times it, each cell in a
+fresh process (nothing compiled yet, no persistent compilation cache). Compilation
 seconds (tracing + lowering + XLA) are read from JAX's monitoring events, per function; the
 epochs from ``on_epoch_end`` timestamps: ``first_epoch_s`` runs from the call to the end of
 epoch 1 (data split, flow initialisation, the compilations of the step and validation loops),
@@ -239,6 +240,10 @@ def main():
     out = json.load(open(args.out)) if os.path.exists(args.out) and not args.quick else {}
     out = {k: v for k, v in out.items() if k in ("npe", "steps", "apt")}  # older layouts dropped
     for cell in args.npe:
+        if len(args.npe) > 1 and not args.quick:  # each cell cold, as vs_sbi.py times it
+            subprocess.run([sys.executable, __file__, "--npe", cell, "--out", args.out], check=True)
+            out["npe"] = json.load(open(args.out))["npe"]
+            continue
         name, budget = cell.split(":")
         res = npe_profile(name, int(budget))
         out.setdefault("npe", {})[f"{name}@{int(budget)}"] = res
