@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import _sbibm  # noqa: E402
 from sbi_tasks import config_for  # noqa: E402
 
 from vdsbi.inference import IdentityEmbedding, Posterior, npe  # noqa: E402
@@ -60,6 +61,9 @@ def main():
     ap.add_argument(
         "--eval-steps", nargs="*", type=int, default=[], help="also score with these ODE step counts"
     )
+    ap.add_argument(
+        "--step-c2st", action="store_true", help="C2ST of --eval-steps samples against the finest's"
+    )
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", default=OUT)
     args = ap.parse_args()
@@ -77,11 +81,18 @@ def main():
     jax.block_until_ready(flow)
     train_s = time.perf_counter() - t0
     nll = np.asarray(_nll(flow, jnp.asarray(theta_t), jnp.asarray(x_t)))
-    by_steps = {}
-    for steps in args.eval_steps:  # the same network integrated more finely (FMPE only)
+    by_steps, c2st_by_steps = {}, {}
+    finest = None
+    for steps in sorted(args.eval_steps, reverse=True):  # the same network, other ODE steps
         other = copy.copy(flow)
         object.__setattr__(other, "ode_steps", steps)
         by_steps[steps] = float(np.mean(np.asarray(_nll(other, jnp.asarray(theta_t), jnp.asarray(x_t)))))
+        if args.step_c2st:  # samples at a fresh simulated x against the finest step count's
+            s = np.asarray(Posterior(other).sample(jax.random.key(2 + steps), 10_000, x=x_t[0]))
+            if finest is None:
+                finest = s
+            else:
+                c2st_by_steps[steps] = _sbibm.c2st(finest, s)
     post = Posterior(flow)
     t0 = time.perf_counter()
     jax.block_until_ready(post.sample(jax.random.key(1), 10_000, x=x_t[0]))
@@ -94,6 +105,7 @@ def main():
         "test_nll": float(np.mean(nll)),
         "test_nll_se": float(np.std(nll) / np.sqrt(nll.size)),
         "test_nll_by_ode_steps": by_steps,
+        "c2st_vs_finest_by_ode_steps": c2st_by_steps,
         "train_s": train_s,
         "sample_10k_s": time.perf_counter() - t0,
         "epochs": info["epochs"],
