@@ -23,7 +23,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--rounds", type=int, default=2, help="APT rounds (default 2)")
     p.add_argument("--sims", type=int, default=1000, help="simulations per round (default 1000)")
     p.add_argument("--embedding", choices=("cnn", "stats"), default="stats", help="default stats")
-    p.add_argument("--epochs", type=int, default=None, help="max training epochs per round (default 40)")
+    p.add_argument("--epochs", type=int, default=None, help="max epochs per round (default 30 stats, 20 cnn)")
     p.add_argument("--samples", type=int, default=1000, help="posterior samples written (default 1000)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--resume", action="store_true", help="continue from DIR's checkpoint")
