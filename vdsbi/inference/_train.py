@@ -72,24 +72,7 @@ def train_step(flow: ConditionalFlow, opt_state, batch, key: PRNGKeyArray, loss:
     return eqx.combine(params, static), opt_state, value
 
 
-# XLA's CPU backend at optimisation level 1 instead of its default: a flow's scanned steps
-# compile ~25 % faster and run ~10 % faster (small matrices; see
-# benchmarks/results/train_profile.md). Other platforms keep their defaults.
-_CPU_OPTIONS = {"xla_backend_optimization_level": 1}
-
-
-def _platform_jit(fun):
-    """``eqx.filter_jit(fun)``, compiled with `_CPU_OPTIONS` when JAX's default backend is the CPU."""
-    default, cpu = eqx.filter_jit(fun), eqx.filter_jit(fun, compiler_options=_CPU_OPTIONS)
-
-    @functools.wraps(fun)
-    def call(*args, **kwargs):
-        return (cpu if jax.default_backend() == "cpu" else default)(*args, **kwargs)
-
-    return call
-
-
-@_platform_jit
+@eqx.filter_jit
 def train_steps(flow: ConditionalFlow, opt_state, batches, keys, loss: AbstractLoss, optimizer, live=None):
     """Consecutive steps in one ``lax.scan``: ``batches`` leaves are ``(num_steps, batch, ...)``.
 
@@ -121,7 +104,7 @@ def train_steps(flow: ConditionalFlow, opt_state, batches, keys, loss: AbstractL
     return eqx.combine(params, static), opt_state, mean
 
 
-@_platform_jit
+@eqx.filter_jit
 def eval_steps(flow: ConditionalFlow, batches, key: PRNGKeyArray, loss: AbstractLoss, live=None):
     """Mean loss over ``(num_batches, batch, ...)`` validation batches (the ``live`` ones), in one
     compiled loop; padding batches are skipped, not evaluated (at 10³ simulations one live batch
