@@ -144,7 +144,7 @@ class FlowMatchingEstimator(eqx.Module):
         num_blocks: int = 3,
         num_freqs: int = 4,
         ode_steps: int = 10,
-        time_power: float = 0.0,
+        time_power: float = 1.0,
         sigma_min: float = 1e-4,
         theta_map: str = "logit",
         theta_standardizer: Standardizer | None = None,
