@@ -112,6 +112,7 @@ def train_ours(task, theta, x, budget, seed):
 def run_cell(task_name, budget, n_obs, num_samples, seed):
     import torch
 
+    commit = _commit()  # of the code this process imported, not of HEAD when the cell ends
     task = get_task(task_name)
     theta, x = simulations(task, budget, seed)
     load_sbi = os.getloadavg()[0]
@@ -143,7 +144,7 @@ def run_cell(task_name, budget, n_obs, num_samples, seed):
         "ours_compile_s": compile_s,
         "load_sbi": load_sbi,
         "load_ours": load_ours,
-        "commit": _commit(),
+        "commit": commit,
         "ours_config": dataclasses.asdict(config_for(budget)),
         "n_obs": n_obs,
         "torch_threads": torch.get_num_threads(),
