@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from vdsbi.api import pairplot
-from vdsbi.inference import TRACE_COUNTS, IdentifySettings, identify, seed_prior
+from vdsbi.inference import TRACE_COUNTS, IdentifySettings, Posterior, identify, observation, seed_prior
 from vdsbi.simulator import (
     NOMINAL_THETA,
     PARAM_NAMES,
@@ -69,6 +69,13 @@ def main(argv=None) -> dict:
     ap.add_argument("--max-epochs", type=int, default=None)
     ap.add_argument("--patience", type=int, default=None)
     ap.add_argument("--lr-schedule", choices=("constant", "cosine"), default=None)
+    ap.add_argument("--later-max-epochs", type=int, default=None)
+    ap.add_argument(
+        "--round-diagnostics",
+        action="store_true",
+        help="spread of 10000 posterior draws at x_o after every round (timed apart, not in the total)",
+    )
+    ap.add_argument("--save-posterior", type=Path, default=None, help="write the final posterior here")
     args = ap.parse_args(argv)
     rounds = args.rounds or (2 if args.quick else 5)
     sims = args.sims or (200 if args.quick else 5000)
@@ -92,7 +99,12 @@ def main(argv=None) -> dict:
     assert bool(ok[0]), "the observation failed to simulate"
     prior = seed_prior(literal=args.literal_prior)
     settings = IdentifySettings(rounds=rounds, sims_per_round=sims, embedding=args.embedding)
-    overrides = {"max_epochs": args.max_epochs, "patience": args.patience, "lr_schedule": args.lr_schedule}
+    overrides = {
+        "max_epochs": args.max_epochs,
+        "patience": args.patience,
+        "lr_schedule": args.lr_schedule,
+        "later_max_epochs": args.later_max_epochs,
+    }
     overrides = {k: v for k, v in overrides.items() if v is not None}
     settings = dataclasses.replace(settings, config=dataclasses.replace(settings.config, **overrides))
     if args.quick:
@@ -100,13 +112,26 @@ def main(argv=None) -> dict:
             settings, config=dataclasses.replace(settings.config, max_epochs=15, patience=4)
         )
 
+    epoch_ends: dict[int, list[float]] = {}  # wall clock at each epoch's end, per round
+
     def on_epoch(r, e, tl, vl):
+        epoch_ends.setdefault(r, []).append(time.perf_counter())
         print(f"  round {r + 1}/{rounds} epoch {e:3d}  train {tl:9.3f}  val {vl:9.3f}", flush=True)
 
     traces = []  # compiled-step traces after each round: growing rounds must not recompile
+    round_spread, diag_s = [], [0.0]
+    inp = simulator.inputs
+    u = jnp.stack([inp.steer, inp.torque_front, inp.torque_rear], axis=-1).astype(jnp.float32)
+    x_obs = observation(x_o[0], u, args.embedding)
 
-    def on_round(_state):
+    def on_round(state):
         traces.append({k: TRACE_COUNTS[k] for k in ("train_steps", "eval_steps")})
+        if args.round_diagnostics:
+            t0 = time.perf_counter()
+            draws = Posterior(state.flow, x_obs).sample(jax.random.key(1000 + state.round), 10_000)
+            round_spread.append(spread(np.asarray(draws)))
+            diag_s[0] += time.perf_counter() - t0
+            print(f"  round {state.round} spread: {round_spread[-1]}", flush=True)
 
     load_start = os.getloadavg()[0]
     t_start = time.perf_counter()
@@ -116,9 +141,14 @@ def main(argv=None) -> dict:
     t_train_end = time.perf_counter()
     t0 = time.perf_counter()
     samples = np.asarray(posterior.sample(jax.random.key(args.seed + 1), 1000))
-    timing = {"sampling": time.perf_counter() - t0, "total": time.perf_counter() - t_start}
+    timing = {"sampling": time.perf_counter() - t0, "total": time.perf_counter() - t_start - diag_s[0]}
+    timing["round_diagnostics"] = diag_s[0]
+    # tails vs width: robust spreads of many draws (the table's std is of the 1000 above)
+    final_spread = spread(np.asarray(posterior.sample(jax.random.key(args.seed + 2), 10_000)))
+    if args.save_posterior is not None:
+        posterior.save(args.save_posterior)
     timing["simulation"] = simulation_seconds(simulator, prior, k_id, rounds, sims)
-    timing["training"] = t_train_end - t_start - timing["simulation"]
+    timing["training"] = t_train_end - t_start - timing["simulation"] - diag_s[0]
 
     params = {}
     for i, name in enumerate(PARAM_NAMES):
@@ -149,9 +179,12 @@ def main(argv=None) -> dict:
         "load_average_at_end": list(os.getloadavg()),
         "num_invalid_simulations": int(state.num_invalid),
         "rounds": [
-            {k: v for k, v in h.items() if k not in ("train_losses", "val_losses")} | {"traces": t}
-            for h, t in zip(state.history, traces)
+            {k: v for k, v in h.items() if k not in ("train_losses", "val_losses")}
+            | {"traces": t, "epoch_s": epoch_seconds(epoch_ends.get(i, []))}
+            for i, (h, t) in enumerate(zip(state.history, traces))
         ],
+        "spread": final_spread,
+        "round_spread": round_spread,
     }
     rows = ["| | " + " | ".join(PARAM_NAMES) + " |", "|---" * (len(PARAM_NAMES) + 1) + "|"]
 
@@ -194,16 +227,35 @@ def main(argv=None) -> dict:
         f"{os.getloadavg()[1]:.2f} (5 min).",
         f"Invalid simulations excluded: {state.num_invalid}.",
         "",
-        "| round | loss | epochs | best epoch | patience | wall s | step traces so far |",
-        "|---|---|---|---|---|---|---|",
+        "| round | loss | epochs (cap) | best epoch | patience | wall s | s per epoch | step traces so far |",
+        "|---|---|---|---|---|---|---|---|",
         *[
-            f"| {h['round'] + 1} | {h['loss']} | {h['epochs']} | {h['best_epoch']} | {h['patience']} "
-            f"| {h['train_s']:.0f} | {t['train_steps']} train, {t['eval_steps']} eval |"
-            for h, t in zip(state.history, traces)
+            f"| {h['round'] + 1} | {h['loss']} | {h['epochs']} ({h.get('max_epochs', '')}) | {h['best_epoch']} "
+            f"| {h['patience']} | {h['train_s']:.0f} | {fmt_s(r['epoch_s']['median_later_epoch_s'])} "
+            f"| {t['train_steps']} train, {t['eval_steps']} eval |"
+            for h, t, r in zip(state.history, traces, result["rounds"])
+        ],
+        "",
+        f"Tails vs width (10000 draws, seed units; far: more than {FAR:g} robust std from the median):",
+        "",
+        "| | " + " | ".join(PARAM_NAMES) + " |",
+        "|---" * (len(PARAM_NAMES) + 1) + "|",
+        *[
+            f"| {label} | " + " | ".join(f"{final_spread[n][k] * m:.3f}" for n in PARAM_NAMES) + " |"
+            for label, k, m in (
+                ("std", "std", 1),
+                ("1.4826·MAD", "mad_sd", 1),
+                ("IQR / 1.349", "iqr_sd", 1),
+                ("far draws, %", "far_fraction", 100),
+                ("std without far draws", "core_std", 1),
+            )
         ],
     ]
     (args.out / f"table2{suffix}.md").write_text("\n".join(md) + "\n")
     (args.out / f"table2{suffix}.json").write_text(json.dumps(result, indent=2))
+    np.savez_compressed(
+        args.out / f"table2{suffix}_samples.npz", samples=samples, names=np.array(PARAM_NAMES)
+    )
     labels = [n if not n.startswith("C_") else "Δ" + n for n in PARAM_NAMES]
     conv_samples = np.stack([to_seed_units(n, samples[:, i]) for i, n in enumerate(PARAM_NAMES)], 1)
     conv_truth = np.array([to_seed_units(n, truth[i]) for i, n in enumerate(PARAM_NAMES)])
@@ -216,6 +268,42 @@ def main(argv=None) -> dict:
     )
     print("\n".join(md))
     return result
+
+
+def fmt_s(v) -> str:
+    return "–" if v is None else f"{v:.1f}"
+
+
+#: A draw this many robust standard deviations from the median counts as "far" (tail).
+FAR = 5.0
+
+
+def spread(samples: np.ndarray) -> dict:
+    """Per parameter (seed units): std, robust std estimates (1.4826·MAD, IQR/1.349), the share
+    of draws more than `FAR` robust std from the median and the std without them. A std far
+    above the robust ones means a thin tail, not a wide peak."""
+    out = {}
+    for i, name in enumerate(PARAM_NAMES):
+        s = to_seed_units(name, samples[:, i])
+        med = np.median(s)
+        mad_sd = 1.4826 * np.median(np.abs(s - med))
+        q25, q75 = np.quantile(s, [0.25, 0.75])
+        near = np.abs(s - med) <= FAR * mad_sd
+        out[name] = {
+            "std": float(s.std()),
+            "mad_sd": float(mad_sd),
+            "iqr_sd": float((q75 - q25) / 1.349),
+            "far_fraction": float(1.0 - near.mean()),
+            "core_std": float(s[near].std()),
+        }
+    return out
+
+
+def epoch_seconds(ends: list[float]) -> dict:
+    """Epochs and the median seconds between consecutive epoch ends (the first epoch, which
+    may compile, is not among them)."""
+    d = np.diff(ends)
+    return {"epochs": len(ends), "median_later_epoch_s": float(np.median(d)) if d.size else None}
 
 
 def simulation_seconds(simulator, prior, key, rounds: int, sims: int) -> float:

@@ -263,6 +263,21 @@ def test_cosine_schedule_runs_its_course_without_recompiling(getkey):
         NPEConfig(lr_schedule="step")
 
 
+def test_later_rounds_are_capped_in_passes_over_their_new_data(getkey):
+    # later_max_epochs=8 over equal rounds: round r (from 0) runs at most round(8 / (r + 1))
+    # epochs (at least 2), so each later round sees about the same number of examples; a round
+    # cut off by its cap has not converged, so the next one waits the full patience.
+    prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
+    cfg = dataclasses.replace(TINY, max_epochs=5, patience=10, later_max_epochs=8)
+    kw = dict(embedding=IdentityEmbedding(2), rounds=4, sims_per_round=160, config=cfg)
+    _, state = apt(getkey(), _gauss_sim, prior, jnp.zeros(2), **kw)
+    assert [h["max_epochs"] for h in state.history] == [5, 4, 3, 2]
+    assert [h["epochs"] for h in state.history] == [5, 4, 3, 2]  # patience 10: no early stop
+    assert [h["patience"] for h in state.history] == [10, 10, 10, 10]
+    with pytest.raises(ValueError, match="later_max_epochs"):
+        NPEConfig(later_max_epochs=0)
+
+
 def test_patience_unit_is_checked():
     with pytest.raises(ValueError, match="patience_unit"):
         NPEConfig(patience_unit="steps")

@@ -116,6 +116,8 @@ def test_identify_settings_train_each_embedding_by_its_own_default():
     assert cnn.config.lr_schedule == stats.config.lr_schedule == "cosine"
     assert cnn.config.max_epochs < stats.config.max_epochs
     assert cnn.npe_config.x_standardize == "trajectory"
+    # the CNN's later rounds are capped (bounded Table II time); the cheap statistics' are not
+    assert cnn.config.later_max_epochs is not None and stats.config.later_max_epochs is None
     mine = NPEConfig(max_epochs=7)
     assert IdentifySettings(embedding="cnn", config=mine).config is mine  # an explicit one is kept
 
@@ -124,11 +126,15 @@ def test_identify_settings_train_each_embedding_by_its_own_default():
 def test_paper_table2_quick_recovers_l_f(tmp_path):
     from experiments.paper_table2 import main
 
-    result = main(["--quick", "--embedding", "stats", "--out", str(tmp_path), "--seed", "0"])
+    argv = ["--quick", "--embedding", "stats", "--out", str(tmp_path), "--seed", "0", "--round-diagnostics"]
+    result = main(argv)
     lf = result["params"]["l_f"]
     assert lf["q025"] <= lf["true"] <= lf["q975"]
     # It learned something: narrower than the prior's std (0.7/√12 ≈ 0.20 m).
     assert lf["std"] < 0.7 / np.sqrt(12)
     saved = json.loads((tmp_path / "table2_quick_stats.json").read_text())
-    assert set(saved["wall_s"]) == {"simulation", "training", "sampling", "total"}
+    assert set(saved["wall_s"]) == {"simulation", "training", "sampling", "total", "round_diagnostics"}
+    # the per-round spread diagnostics ran after each round; the samples are kept
+    assert len(saved["round_spread"]) == 2 and 0.0 <= saved["spread"]["l_f"]["far_fraction"] <= 1.0
+    assert np.load(tmp_path / "table2_quick_stats_samples.npz")["samples"].shape == (1000, 6)
     assert (tmp_path / "fig3_quick_stats.png").stat().st_size > 10_000

@@ -52,6 +52,11 @@ class NPEConfig:
             converged for ``patience_unit="new_data"``. Rounds that continue a trained flow keep
             the constant rate and early stopping (a 30-epoch cosine there ran round 2 of the
             vehicle's Table II to its end, 124 s instead of ~45 s).
+        later_max_epochs: opt-in cap for rounds that continue a trained flow, in passes over the
+            round's NEW training simulations: ``round(later_max_epochs * new / all)`` epochs, at
+            least 2 and at most ``max_epochs``. Such an epoch costs in proportion to all the
+            data so far, so the cap bounds every later round's cost to about the same (the
+            vehicle's Table II, whose later rounds ran 3-20 epochs). None (default): ``max_epochs``.
         patience_unit: what ``patience`` counts. ``"epochs"``: epochs over all of a round's
             training data (sbi's rule). ``"new_data"`` (default): examples seen, in passes over
             the round's NEW training simulations, i.e. ``ceil(patience * new / all)`` epochs, at
@@ -98,6 +103,7 @@ class NPEConfig:
     patience: int = 20
     patience_unit: Literal["epochs", "new_data"] = "new_data"
     lr_schedule: Literal["constant", "cosine"] = "constant"
+    later_max_epochs: int | None = None
     ensemble: int = 1
     validation_fraction: float = 0.1
     num_atoms: int = 10
@@ -130,6 +136,8 @@ class NPEConfig:
             raise ValueError(f"lr_schedule must be 'constant' or 'cosine', got {self.lr_schedule!r}")
         if self.theta_map not in ("logit", "affine"):
             raise ValueError(f"theta_map must be 'logit' or 'affine', got {self.theta_map!r}")
+        if self.later_max_epochs is not None and self.later_max_epochs < 1:
+            raise ValueError(f"later_max_epochs must be >= 1 or None, got {self.later_max_epochs}")
         if self.ensemble < 1:
             raise ValueError(f"ensemble must be >= 1, got {self.ensemble}")
         if self.num_atoms < 2:
@@ -500,6 +508,7 @@ def _train_round(
     schedule = config.lr_schedule if fresh else "constant"  # see NPEConfig.lr_schedule
     if fresh:
         flow = build_flow(k_init, problem.prior, problem.embedding, theta[~is_val], x[~is_val], config)
+    max_epochs = config.max_epochs if fresh else _later_max_epochs(config, round_ids, is_val, r)
     if r == 0 or problem.truncate:
         loss = first_round_loss(config)
     else:
@@ -516,14 +525,15 @@ def _train_round(
         learning_rate=config.learning_rate,
         weight_decay=config.weight_decay,
         clip_norm=config.clip_norm,
-        max_epochs=config.max_epochs,
+        max_epochs=max_epochs,
         patience=patience,
         on_epoch_end=problem.on_epoch_end,
         round_index=r,
         mesh=problem.mesh,
         lr_schedule=schedule,
     )
-    return flow, {**finfo, "loss": type(loss).__name__, "patience": patience, "lr_schedule": schedule}
+    info = {"loss": type(loss).__name__, "patience": patience, "lr_schedule": schedule}
+    return flow, {**finfo, **info, "max_epochs": max_epochs}
 
 
 def first_round_loss(config: NPEConfig) -> MaximumLikelihoodLoss | FlowMatchingLoss:
@@ -547,13 +557,28 @@ def _round_patience(
     it anyway, two_moons 2 × 1500 at 40 epochs scored C2ST 0.72 instead of 0.66).
     """
     # a decaying schedule that ran its course ended on small steps: converged by design
-    ran_out = previous is not None and previous["epochs"] >= config.max_epochs
+    ran_out = previous is not None and previous["epochs"] >= previous.get("max_epochs", config.max_epochs)
     decayed = previous is not None and previous.get("lr_schedule", "constant") != "constant"
     converged = previous is not None and (not ran_out or decayed)
     if config.patience_unit == "epochs" or config.retrain_from_scratch or not converged:
         return config.patience
-    train = ~is_val
-    num_new, num_all = int(np.sum(train & (round_ids == r))), int(np.sum(train))
-    scaled = math.ceil(config.patience * num_new / max(num_all, 1))
+    num_new, num_all = _new_and_all(round_ids, is_val, r)
+    scaled = math.ceil(config.patience * num_new / num_all)
     # at least two epochs: one noisy validation epoch must not end a round
     return min(config.patience, max(_MIN_PATIENCE, scaled))
+
+
+def _new_and_all(round_ids: np.ndarray, is_val: np.ndarray, r: int) -> tuple[int, int]:
+    """Round ``r``'s training examples and all training examples (at least 1)."""
+    train = ~is_val
+    return int(np.sum(train & (round_ids == r))), max(int(np.sum(train)), 1)
+
+
+def _later_max_epochs(config: NPEConfig, round_ids: np.ndarray, is_val: np.ndarray, r: int) -> int:
+    """Epoch cap of round ``r`` continuing a trained flow (see ``NPEConfig.later_max_epochs``)."""
+    if config.later_max_epochs is None:
+        return config.max_epochs
+    # rounded, not ceil'd: one invalid draw must not add an epoch (15.002 -> 16)
+    num_new, num_all = _new_and_all(round_ids, is_val, r)
+    capped = round(config.later_max_epochs * num_new / num_all)
+    return min(config.max_epochs, max(_MIN_PATIENCE, capped))
