@@ -71,6 +71,12 @@ def main(argv=None) -> dict:
     ap.add_argument("--lr-schedule", choices=("constant", "cosine"), default=None)
     ap.add_argument("--later-max-epochs", type=int, default=None)
     ap.add_argument(
+        "--truncate",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="TSNPE proposals (default: settings')",
+    )
+    ap.add_argument(
         "--round-diagnostics",
         action="store_true",
         help="spread of 10000 posterior draws at x_o after every round (timed apart, not in the total)",
@@ -99,6 +105,8 @@ def main(argv=None) -> dict:
     assert bool(ok[0]), "the observation failed to simulate"
     prior = seed_prior(literal=args.literal_prior)
     settings = IdentifySettings(rounds=rounds, sims_per_round=sims, embedding=args.embedding)
+    if args.truncate is not None:
+        settings = dataclasses.replace(settings, truncate=args.truncate)
     overrides = {
         "max_epochs": args.max_epochs,
         "patience": args.patience,
@@ -172,6 +180,7 @@ def main(argv=None) -> dict:
             "seed": args.seed,
             "prior": {n: [float(lo[i]), float(hi[i])] for i, n in enumerate(PARAM_NAMES)},
             "patience_unit": settings.config.patience_unit,
+            "truncate": settings.truncate,
             "config": dataclasses.asdict(settings.npe_config),
         },
         "load_average_at_start": load_start,
@@ -290,6 +299,7 @@ def spread(samples: np.ndarray) -> dict:
         q25, q75 = np.quantile(s, [0.25, 0.75])
         near = np.abs(s - med) <= FAR * mad_sd
         out[name] = {
+            "median": float(med),
             "std": float(s.std()),
             "mad_sd": float(mad_sd),
             "iqr_sd": float((q75 - q25) / 1.349),
