@@ -137,5 +137,5 @@ def test_paper_table2_quick_recovers_l_f(tmp_path):
     assert set(saved["wall_s"]) == {"simulation", "training", "sampling", "total", "round_diagnostics"}
     # the per-round spread diagnostics ran after each round; the samples are kept
     assert len(saved["round_spread"]) == 2 and 0.0 <= saved["spread"]["l_f"]["far_fraction"] <= 1.0
-    assert np.load(tmp_path / "table2_quick_stats_samples.npz")["samples"].shape == (1000, 6)
+    assert np.load(tmp_path / "table2_quick_stats_samples.npz")["samples"].shape == (10_000, 6)
     assert (tmp_path / "fig3_quick_stats.png").stat().st_size > 10_000
