@@ -36,6 +36,9 @@ def pytest_configure(config):
     # not execution, dominates this suite's wall time.
     import os
 
-    cache = os.path.join(os.path.dirname(__file__), "..", ".jax_cache")
-    jax.config.update("jax_compilation_cache_dir", os.path.abspath(cache))
+    cache = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".jax_cache"))
+    jax.config.update("jax_compilation_cache_dir", cache)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    # The same for the fresh interpreters some tests start (reload, 4 host devices, CLI).
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = cache
+    os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"

@@ -4,6 +4,7 @@ written files name only the folders the user gave (the base model's warning: tes
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 from pathlib import Path
@@ -79,22 +80,26 @@ def test_identify_with_the_effect_recovers_the_bias(effect_run):
 
 
 @pytest.fixture(scope="module")
-def diagnosis(biased, tmp_path_factory):
-    """`vdsbi diagnose` on the biased drive, searching two effects only (cheap)."""
+def diagnosis(biased, tmp_path_factory) -> tuple[Path, str]:
+    """`vdsbi diagnose` on the biased drive, searching two effects only (cheap): its folder and
+    what it printed."""
     out = tmp_path_factory.mktemp("loop") / "diag"
     rec, veh = biased
     args = ["diagnose", str(rec), "--vehicle", str(veh), "--out", str(out), "--final-dt", "0.005"]
-    return out, [*args, "--effects", "sensor_bias,road_grade", "--top-pairs", "0"]
+    args += ["--effects", "sensor_bias,road_grade", "--top-pairs", "0"]
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        assert main(args) == 0
+    return out, printed.getvalue()
 
 
-def test_diagnose_ends_with_the_identify_command_that_models_what_it_named(biased, diagnosis, capsys):
+def test_diagnose_ends_with_the_identify_command_that_models_what_it_named(biased, diagnosis):
     import shlex
 
     from vdsbi.cli import build_parser
 
-    out, args = diagnosis
-    assert main(args) == 0
-    last = capsys.readouterr().out.strip().splitlines()[-1]
+    out, printed = diagnosis
+    last = printed.strip().splitlines()[-1]
     rec, veh = biased
     target = out.parent / "identify-sensor_bias"
     assert last == f"vdsbi identify {rec} --vehicle {veh} --out {target} --effects sensor_bias"
@@ -104,10 +109,18 @@ def test_diagnose_ends_with_the_identify_command_that_models_what_it_named(biase
     assert json.loads((out / "report.json").read_text())["identify_command"] == last
 
 
+def test_diagnose_names_the_bias_writes_its_figures_and_leaves_the_precision_alone(diagnosis):
+    import jax
+
+    out, _ = diagnosis
+    assert json.loads((out / "report.json").read_text())["chosen"] == ["sensor_bias"]
+    for f in ("report.md", "residual_heatmap.png", "overlay.png", "residual_spectra.png"):
+        assert (out / f).stat().st_size > 0, f
+    assert jax.config.jax_enable_x64 is False  # diagnose leaves the global precision alone
+
+
 def test_every_folder_has_a_report_page_and_names_no_temporary_folder(effect_run, diagnosis):
-    out, args = diagnosis
-    if not out.exists():
-        assert main([*args, "--quiet"]) == 0
+    out, _ = diagnosis
     for folder in (effect_run, out):
         check_folder(folder)
     assert "sensor_bias.ax" in (effect_run / "report.html").read_text()

@@ -3,6 +3,7 @@ are enforced, and the CLI writes a valid recording with before/after bounds."""
 
 import json
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -54,8 +55,10 @@ def test_design_increases_information_within_limits(x64):
     )
     assert chk["respected"], chk
     # The design objective is what it claims: −log of the C_kappa_r entry of F⁻¹ (scaled).
-    obj = problem(res.maneuver)
-    fz, _, _ = problem.fisher_scaled(res.maneuver.inputs(LIMITS), res.maneuver.initial_speed(LIMITS))
+    # (Compiled, as the optimiser runs it: op by op, each call costs seconds.)
+    obj = eqx.filter_jit(problem)(res.maneuver)
+    fisher = eqx.filter_jit(lambda m: problem.fisher_scaled(m.inputs(LIMITS), m.initial_speed(LIMITS))[0])
+    fz = fisher(res.maneuver)
     assert float(obj.information) == pytest.approx(-np.log(np.linalg.inv(np.asarray(fz))[3, 3]), rel=1e-9)
 
 

@@ -1,12 +1,12 @@
 """Mismatch discovery end to end, kept small: one quick concealed-effects run (a clean and a
 sensor-bias recording, written as files and diagnosed from the files alone) shared by all tests,
-plus a noise-free recovery check that reuses the same compiled kernels."""
+plus a noise-free recovery check that reuses the same compiled kernels. `vdsbi diagnose` itself
+(report, figures, the identify command it ends with): test_cli_loop."""
 
 import json
 import sys
 from pathlib import Path
 
-import jax
 import numpy as np
 import pytest
 
@@ -102,36 +102,6 @@ def test_fit_recovers_theta_noise_free(quick, x64):
     assert fit.chi2_dof < 0.02
     rel = np.abs(fit.theta - theta) / theta
     assert rel[0] < 0.01 and rel[4] < 0.02 and rel[5] < 0.02, dict(zip(PARAM_NAMES, rel))
-
-
-def test_cli_diagnose(quick, tmp_path):
-    from vdsbi.cli import main
-
-    folder = _case(quick, "sensor_bias")
-    out = tmp_path / "diag"
-    code = main(
-        [
-            "diagnose",
-            str(folder / "recording.csv"),
-            "--vehicle",
-            str(folder / "vehicle.json"),
-            "--out",
-            str(out),
-            "--quiet",
-            "--final-dt",
-            "0.005",
-            "--effects",
-            "sensor_bias,road_grade",
-            "--top-pairs",
-            "0",
-        ]
-    )
-    assert code == 0
-    rep = json.loads((out / "report.json").read_text())
-    assert rep["chosen"] == ["sensor_bias"]
-    for f in ("report.md", "residual_heatmap.png", "overlay.png", "residual_spectra.png"):
-        assert (out / f).exists()
-    assert jax.config.jax_enable_x64 is False  # diagnose leaves the global precision alone
 
 
 def test_pairs_pay_a_prior_penalty_and_ranking_agrees_with_choice():
