@@ -21,6 +21,31 @@ def x64():
         yield
 
 
+@pytest.fixture(scope="session")
+def once_per_run(tmp_path_factory):
+    """`once_per_run(name, make)`: the folder `make(folder)` filled, made once per test run. Under
+    xdist a module fixture runs on every worker that gets one of the file's tests; with this the
+    first worker makes the folder and the others wait for it and read it."""
+    import fcntl
+    import os
+
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # shared by the workers of this run
+
+    def get(name: str, make):
+        folder = root / name
+        with open(root / f"{name}.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if not (folder / ".done").exists():
+                folder.mkdir(exist_ok=True)
+                make(folder)
+                (folder / ".done").touch()
+        return folder
+
+    return get
+
+
 def tree_allclose(a, b, rtol=1e-5, atol=1e-8) -> bool:
     la, lb = jax.tree.leaves(a), jax.tree.leaves(b)
     return len(la) == len(lb) and all(

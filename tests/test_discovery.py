@@ -20,12 +20,14 @@ from vdsbi.simulator import CHANNELS, PARAM_NAMES, simulate  # noqa: E402
 
 
 @pytest.fixture(scope="module")
-def quick(tmp_path_factory):
+def quick(once_per_run):
     from experiments import concealed_effects
 
-    base = tmp_path_factory.mktemp("concealed")
-    assert concealed_effects.main(["--quick", "--data", str(base / "data"), "--out", str(base / "out")]) == 0
-    return base
+    def run(base):
+        argv = ["--quick", "--data", str(base / "data"), "--out", str(base / "out")]
+        assert concealed_effects.main(argv) == 0
+
+    return once_per_run("concealed_quick", run)
 
 
 def _case(quick, name):
