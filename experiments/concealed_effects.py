@@ -565,9 +565,12 @@ def main(argv=None) -> int:
     ap.add_argument("--suite", choices=("library", "multi", "outside"), default="library")
     ap.add_argument("--only", nargs="+", default=None, help="library suite: only these effects")
     ap.add_argument("--repeats", type=int, default=1, help="outside suite: recordings per kind")
+    # a process-wide JAX setting: only for the script run, never when a caller (a test) imports main
+    ap.add_argument("--compile-cache", action=argparse.BooleanOptionalAction, default=argv is None)
     args = ap.parse_args(argv)
-    jax.config.update("jax_compilation_cache_dir", str(Path(args.data).parent / "vdsbi_jax_cache"))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 2.0)
+    if args.compile_cache:
+        jax.config.update("jax_compilation_cache_dir", str(Path(args.data).parent / "vdsbi_jax_cache"))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 2.0)
     data = Path(args.data) / ("quick" if args.quick else "full")
     if args.suite != "library":
         data = data.with_name(f"{data.name}_{args.suite}")

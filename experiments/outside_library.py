@@ -65,9 +65,12 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "experiments" / "results"))
     ap.add_argument("--only", nargs="+", default=list(CORRUPTIONS))
     ap.add_argument("--seed", type=int, default=777)
+    # a process-wide JAX setting: only for the script run, never when a caller (a test) imports main
+    ap.add_argument("--compile-cache", action=argparse.BooleanOptionalAction, default=argv is None)
     args = ap.parse_args(argv)
-    jax.config.update("jax_compilation_cache_dir", str(Path(args.data).parent / "vdsbi_jax_cache"))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 2.0)
+    if args.compile_cache:
+        jax.config.update("jax_compilation_cache_dir", str(Path(args.data).parent / "vdsbi_jax_cache"))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 2.0)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
