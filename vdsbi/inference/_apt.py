@@ -276,6 +276,14 @@ def build_flow(
     return _init_compiled(make, key)
 
 
+# XLA's CPU backend at optimisation level 1 (default 2+). Used for the initialisation only: the
+# training steps also compile faster at level 1 and took 88 instead of 124 ms per epoch in one
+# A/B (two_moons 10⁴, s7), but their results are not bit-identical, and over 4 training seeds
+# two_moons 10⁴ scored C2ST 0.554 against 0.544 (benchmarks/results/vs_sbi_variants.jsonl,
+# "affine_s7" vs "affine"): not adopted on that evidence.
+_INIT_CPU_OPTIONS = {"xla_backend_optimization_level": 1}
+
+
 def _init_compiled(make: Callable[[PRNGKeyArray], Any], key: PRNGKeyArray):
     """``make(key)`` as one compiled program (on the CPU at XLA optimisation level 1).
 
@@ -289,14 +297,6 @@ def _init_compiled(make: Callable[[PRNGKeyArray], Any], key: PRNGKeyArray):
     shapes = eqx.filter_eval_shape(make, key)
     static = eqx.filter(shapes, lambda a: isinstance(a, jax.ShapeDtypeStruct), inverse=True)
     return eqx.combine(arrays, static)
-
-
-# XLA's CPU backend at optimisation level 1 (default 2+). Used for the initialisation only: the
-# training steps also compile faster at level 1 and took 88 instead of 124 ms per epoch in one
-# A/B (two_moons 10⁴, s7), but their results are not bit-identical, and over 4 training seeds
-# two_moons 10⁴ scored C2ST 0.554 against 0.544 (benchmarks/results/vs_sbi_variants.jsonl,
-# "affine_s7" vs "affine"): not adopted on that evidence.
-_INIT_CPU_OPTIONS = {"xla_backend_optimization_level": 1}
 
 
 def _truncated_prior(key, flow, prior, x_o, n, config) -> tuple[Array, dict]:
