@@ -73,6 +73,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--patience", type=int, default=None)
     ap.add_argument("--lr-schedule", choices=("constant", "cosine"), default=None)
     ap.add_argument("--later-max-epochs", type=int, default=None)
+    ap.add_argument("--tail-bound", type=float, default=None, help="spline interval [-B, B] of the flow")
     ap.add_argument(
         "--truncate",
         action=argparse.BooleanOptionalAction,
@@ -115,6 +116,7 @@ def main(argv=None) -> dict:
         "patience": args.patience,
         "lr_schedule": args.lr_schedule,
         "later_max_epochs": args.later_max_epochs,
+        "tail_bound": args.tail_bound,
     }
     overrides = {k: v for k, v in overrides.items() if v is not None}
     settings = dataclasses.replace(settings, config=dataclasses.replace(settings.config, **overrides))
