@@ -345,17 +345,17 @@ def test_build_flow_weights_equal_the_op_by_op_build(getkey):
     # ones the plain program gives, bit for bit
     import equinox as eqx
 
-    import vdsbi.inference._apt as apt_module
+    import vdsbi.inference._build as build_module
 
     theta, x, flow, _ = _tiny_problem(getkey, 64)
     key = getkey()
     got = build_flow(key, flow.prior, IdentityEmbedding(2), theta, x, TINY)
-    orig = apt_module._init_compiled
+    orig = build_module._init_compiled
     try:
-        apt_module._init_compiled = lambda make, k: eqx.filter_jit(make)(k)
+        build_module._init_compiled = lambda make, k: eqx.filter_jit(make)(k)
         want = build_flow(key, flow.prior, IdentityEmbedding(2), theta, x, TINY)
     finally:
-        apt_module._init_compiled = orig
+        build_module._init_compiled = orig
     assert jax.tree.structure(got) == jax.tree.structure(want)
     assert tree_allclose(got, want, rtol=0, atol=0)
 

@@ -1,15 +1,10 @@
 """Neural posterior estimation in JAX: spline flows, flow matching (FMPE), NPE and APT / SNPE-C."""
 
-from ._apt import (
-    APTState as APTState,
-    NPEConfig as NPEConfig,
-    TrainConfig as TrainConfig,
-    apt as apt,
-    build_flow as build_flow,
-    load_state as load_state,
-    save_state as save_state,
-)
+from ._apt import apt as apt
+from ._apt_state import APTState as APTState, load_state as load_state, save_state as save_state
+from ._build import build_flow as build_flow
 from ._cnn import CNNEmbedding as CNNEmbedding
+from ._config import NPEConfig as NPEConfig, TrainConfig as TrainConfig
 from ._embeddings import (
     AbstractEmbedding as AbstractEmbedding,
     IdentityEmbedding as IdentityEmbedding,

@@ -7,7 +7,8 @@ import jax
 import numpy as np
 from jaxtyping import PRNGKeyArray
 
-from ._apt import NPEConfig, build_flow, first_round_loss
+from ._build import build_flow, first_round_loss
+from ._config import NPEConfig
 from ._embeddings import AbstractEmbedding
 from ._flow import ConditionalFlow
 from ._prior import BoxPrior

@@ -10,8 +10,10 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..io import InputError, SimulationError
 from ..simulator import PARAM_NAMES, StochasticSimulator
-from ._apt import APTState, NPEConfig, apt
+from ._apt import apt
+from ._apt_state import APTState
 from ._cnn import CNNEmbedding
+from ._config import NPEConfig
 from ._embeddings import MLPEmbedding
 from ._posterior import Posterior
 from ._prior import BoxPrior

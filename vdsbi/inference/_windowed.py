@@ -11,7 +11,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..problem import Problem, simulate_draws, split_parameters, windowed_model
 from ..simulator import Solver
-from ._apt import APTState
+from ._apt_state import APTState
 from ._posterior import Posterior
 from ._prior import BoxPrior
 from ._vehicle import IdentifySettings, fit_posterior, observation

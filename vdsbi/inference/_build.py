@@ -1,0 +1,101 @@
+"""A fresh estimator for a round: its standardisations fitted on the data, initialised compiled."""
+
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import PRNGKeyArray
+
+from ._config import NPEConfig
+from ._embeddings import AbstractEmbedding
+from ._flow import ConditionalFlow, FlowEnsemble
+from ._flow_matching import FlowMatchingEstimator, FlowMatchingLoss
+from ._loss import MaximumLikelihoodLoss
+from ._prior import BoxPrior
+from ._standardize import Standardizer
+
+
+def build_flow(
+    key: PRNGKeyArray,
+    prior: BoxPrior,
+    embedding: AbstractEmbedding,
+    theta: np.ndarray,
+    x: np.ndarray,
+    config: NPEConfig,
+) -> ConditionalFlow | FlowEnsemble:
+    """A fresh flow (``config.ensemble > 1``: an ensemble of them, sharing the standardisations)
+    whose θ (logit- or θ-scale) and x standardisations are fitted on ``theta``/``x``."""
+    z = jnp.asarray(theta)
+    if config.theta_map == "logit":
+        z, _ = jax.vmap(prior.to_unbounded)(z)
+    x_standardizer = Standardizer.fit(jnp.asarray(x), config.x_standardize)
+    # data-dependent initialisation of the embedding (a fixed subset bounds the cost)
+    embedding = embedding.calibrate(jax.vmap(x_standardizer)(jnp.asarray(x[:2048])))
+    theta_standardizer = Standardizer.fit(z, "channel")
+
+    def make(k):
+        if config.estimator == "fmpe":
+            return FlowMatchingEstimator(
+                k,
+                prior,
+                embedding,
+                x.shape[1:],
+                hidden=config.fmpe_hidden,
+                num_blocks=config.fmpe_num_blocks,
+                ode_steps=config.fmpe_ode_steps,
+                time_power=config.fmpe_time_power,
+                theta_map=config.theta_map,
+                theta_standardizer=theta_standardizer,
+                x_standardizer=x_standardizer,
+            )
+        return ConditionalFlow(
+            k,
+            prior,
+            embedding,
+            x.shape[1:],
+            num_layers=config.num_layers,
+            num_bins=config.num_bins,
+            hidden=config.hidden,
+            num_blocks=config.num_blocks,
+            tail_bound=config.tail_bound,
+            use_lu=config.use_lu,
+            context_gating=config.context_gating,
+            theta_map=config.theta_map,
+            theta_standardizer=theta_standardizer,
+            x_standardizer=x_standardizer,
+        )
+
+    if config.ensemble > 1:  # members share the embedding's initial weights, not the flows'
+        return _init_compiled(lambda k: FlowEnsemble(make, jax.random.split(k, config.ensemble)), key)
+    return _init_compiled(make, key)
+
+
+# XLA's CPU backend at optimisation level 1 (default 2+). Used for the initialisation only: the
+# training steps also compile faster at level 1 and took 88 instead of 124 ms per epoch in one
+# A/B (two_moons 10⁴, s7), but their results are not bit-identical, and over 4 training seeds
+# two_moons 10⁴ scored C2ST 0.554 against 0.544 (benchmarks/results/vs_sbi_variants.jsonl,
+# "affine_s7" vs "affine"): not adopted on that evidence.
+_INIT_CPU_OPTIONS = {"xla_backend_optimization_level": 1}
+
+
+def _init_compiled(make: Callable[[PRNGKeyArray], Any], key: PRNGKeyArray):
+    """``make(key)`` as one compiled program (on the CPU at XLA optimisation level 1).
+
+    Built op by op, the initialisation compiled dozens of small kernels (~2-5 s of a
+    10⁴-simulation NPE run); as one program at the CPU's default level its threefry draws
+    still took ~1.5 s to compile for a program that runs once. Level 1 gives the same weights
+    bit for bit in about half the time (``benchmarks/results/train_profile.md``).
+    """
+    options = _INIT_CPU_OPTIONS if jax.default_backend() == "cpu" else None
+    arrays = jax.jit(lambda k: eqx.filter(make(k), eqx.is_array), compiler_options=options)(key)
+    shapes = eqx.filter_eval_shape(make, key)
+    static = eqx.filter(shapes, lambda a: isinstance(a, jax.ShapeDtypeStruct), inverse=True)
+    return eqx.combine(arrays, static)
+
+
+def first_round_loss(config: NPEConfig) -> MaximumLikelihoodLoss | FlowMatchingLoss:
+    """The loss on prior (or truncated-prior) draws: maximum likelihood, or flow matching."""
+    return FlowMatchingLoss() if config.estimator == "fmpe" else MaximumLikelihoodLoss()
