@@ -161,6 +161,45 @@ def _blocks(idx: np.ndarray, size: int) -> list[tuple[np.ndarray, np.ndarray]]:
     return out
 
 
+def _batch_sizes(num_train: int, num_val: int, batch_size: int, ndev: int) -> tuple[int, int]:
+    """Training and validation batch sizes (see `_batch_size`), or a clear error if too few data."""
+    bsz = _batch_size(batch_size, num_train, ndev)
+    vsz = _batch_size(batch_size, num_val, ndev)
+    if bsz < 2 or vsz < 1:
+        raise ValueError(
+            f"Too few simulations to train: {num_train} training / {num_val} validation examples "
+            f"for {ndev} device(s)."
+        )
+    return bsz, vsz
+
+
+def _validation_blocks(data, va: np.ndarray, vsz: int, block: int, mesh) -> list:
+    """The validation set in full batches of ``vsz``, grouped in padded blocks of ``block``
+    batches: ``(stacked batches, live mask, number of live batches)`` per block."""
+    nvb = va.size // vsz
+    val_idx = va[: nvb * vsz].reshape(nvb, vsz)
+    return [
+        (stack_batches(tuple(a[idx] for a in data), mesh), live, live.sum())
+        for idx, live in _blocks(val_idx, block)
+    ]
+
+
+def _train_epoch(flow, opt_state, keys, data, tr: np.ndarray, bsz: int, block: int, mesh, loss, optimizer):
+    """One pass over a random permutation of the training rows ``tr`` (``keys = (k_perm, k_steps)``),
+    in compiled blocks of ``block`` steps; returns ``(flow, opt_state, mean training loss)``."""
+    k_perm, k_steps = keys
+    nb = tr.size // bsz
+    perm = tr[np.asarray(jax.random.permutation(k_perm, tr.size))][: nb * bsz].reshape(nb, bsz)
+    step_keys = jax.random.split(k_steps, nb)
+    total = jnp.zeros(())
+    for j, (idx, live) in enumerate(_blocks(perm, block)):
+        batches = stack_batches(tuple(a[idx] for a in data), mesh)
+        keys = step_keys[np.minimum(np.arange(j * block, (j + 1) * block), nb - 1)]
+        flow, opt_state, mean = train_steps(flow, opt_state, batches, keys, loss, optimizer, live)
+        total = total + mean * live.sum()
+    return flow, opt_state, float(total) / nb
+
+
 def fit(
     key: PRNGKeyArray,
     flow: ConditionalFlow,
@@ -192,16 +231,8 @@ def fit(
     `epoch_learning_rate`) sets the learning rate per epoch over ``max_epochs``.
     """
     mesh = data_mesh() if mesh is None else mesh
-    ndev = mesh.devices.size
     tr, va = np.flatnonzero(~is_val), np.flatnonzero(is_val)
-    bsz = _batch_size(batch_size, tr.size, ndev)
-    vsz = _batch_size(batch_size, va.size, ndev)
-    if bsz < 2 or vsz < 1:
-        raise ValueError(
-            f"Too few simulations to train: {tr.size} training / {va.size} validation examples "
-            f"for {ndev} device(s)."
-        )
-    nb, nvb = tr.size // bsz, va.size // vsz
+    bsz, vsz = _batch_sizes(tr.size, va.size, batch_size, mesh.devices.size)
     scheduled = lr_schedule != "constant"
     epoch_learning_rate(learning_rate, lr_schedule, 0, max_epochs)  # checks the name
     optimizer = make_optimizer(float(learning_rate), float(weight_decay), float(clip_norm), scheduled)
@@ -209,15 +240,11 @@ def fit(
     opt_state = replicate(init_opt_state(flow, optimizer), mesh)
     key, val_key = jax.random.split(key)
     data = (theta, x, prior_mask)
-    val_idx = va[: nvb * vsz].reshape(nvb, vsz)
-    val_batches = [
-        (stack_batches(tuple(a[idx] for a in data), mesh), live, live.sum())
-        for idx, live in _blocks(val_idx, steps_per_call)
-    ]
+    val_batches = _validation_blocks(data, va, vsz, steps_per_call, mesh)
+    nvb = va.size // vsz
     # The validation loop compiles on a second thread while the first training block
     # compiles (XLA compiles without holding the GIL); its value, the initial loss, is unused.
     warm = _in_background(eval_steps, flow, val_batches[0][0], val_key, loss, val_batches[0][1])
-    block = steps_per_call
     best, best_flow, best_epoch, since = np.inf, flow, -1, 0
     train_hist, val_hist = [], []
     for epoch in range(max_epochs):
@@ -225,15 +252,9 @@ def fit(
         if scheduled:
             lr = epoch_learning_rate(learning_rate, lr_schedule, epoch, max_epochs)
             opt_state = _set_learning_rate(opt_state, lr)
-        perm = tr[np.asarray(jax.random.permutation(k_perm, tr.size))][: nb * bsz].reshape(nb, bsz)
-        step_keys = jax.random.split(k_steps, nb)
-        total = jnp.zeros(())
-        for j, (idx, live) in enumerate(_blocks(perm, block)):
-            batches = stack_batches(tuple(a[idx] for a in data), mesh)
-            keys = step_keys[np.minimum(np.arange(j * block, (j + 1) * block), nb - 1)]
-            flow, opt_state, mean = train_steps(flow, opt_state, batches, keys, loss, optimizer, live)
-            total = total + mean * live.sum()
-        train_loss = float(total) / nb
+        flow, opt_state, train_loss = _train_epoch(
+            flow, opt_state, (k_perm, k_steps), data, tr, bsz, steps_per_call, mesh, loss, optimizer
+        )
         warm.result()  # compiled (or raised) before the loop calls it: never compiled twice
         val_loss = sum(float(eval_steps(flow, vb, val_key, loss, lv)) * n for vb, lv, n in val_batches) / nvb
         train_hist.append(train_loss)
