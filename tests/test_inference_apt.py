@@ -352,7 +352,7 @@ def test_build_flow_weights_equal_the_op_by_op_build(getkey):
     got = build_flow(key, flow.prior, IdentityEmbedding(2), theta, x, TINY)
     orig = build_module._init_compiled
     try:
-        build_module._init_compiled = lambda make, k: eqx.filter_jit(make)(k)
+        build_module._init_compiled = lambda k, parts: eqx.filter_jit(build_module._make_estimator)(k, *parts)
         want = build_flow(key, flow.prior, IdentityEmbedding(2), theta, x, TINY)
     finally:
         build_module._init_compiled = orig
