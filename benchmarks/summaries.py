@@ -76,6 +76,7 @@ def main(argv=None):
     ap.add_argument("--lr-schedule", choices=("constant", "cosine"), default=None)
     ap.add_argument("--ensemble", type=int, default=None)
     ap.add_argument("--theta-map", choices=("logit", "affine"), default=None)
+    ap.add_argument("--tail-bound", type=float, default=None, help="spline interval [-B, B] of the flow")
     ap.add_argument("--tag", default="", help="suffix for the output files")
     args = ap.parse_args(argv)
     n_sims = args.sims or (400 if args.quick else 5000)
@@ -110,6 +111,7 @@ def main(argv=None):
         "lr_schedule": args.lr_schedule,
         "ensemble": args.ensemble,
         "theta_map": args.theta_map,
+        "tail_bound": args.tail_bound,
     }
     overrides = {k: v for k, v in overrides.items() if v is not None}
     configs = {  # each embedding's IdentifySettings default, with the overrides
