@@ -1,19 +1,9 @@
 import itertools
-import os
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-
-# Compiling is most of this suite's time (hundreds of small programs, most run once on tiny
-# data): XLA's CPU backend at LLVM optimisation level 0 compiles them faster (a compile-bound
-# trio of tests 33-36 s -> 26 s; the float64 design and term-recovery tests 88 -> 76 s), though
-# the compiled code runs slower (two_moons APT 36 -> 51 s). Read once, when JAX starts its
-# backend; the subprocesses the tests start inherit it; a level already in XLA_FLAGS is kept.
-_flags = os.environ.get("XLA_FLAGS", "")
-if "xla_backend_optimization_level" not in _flags:
-    os.environ["XLA_FLAGS"] = f"{_flags} --xla_backend_optimization_level=0".strip()
 
 
 @pytest.fixture
