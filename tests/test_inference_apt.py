@@ -360,6 +360,35 @@ def test_build_flow_weights_equal_the_op_by_op_build(getkey):
     assert tree_allclose(got, want, rtol=0, atol=0)
 
 
+def test_build_flow_compiles_its_initialisation_once_per_structure(getkey):
+    # cached on the static structure, so a second build of the same shapes compiles nothing; an
+    # embedding holding an unhashable value still builds (uncached), with the same weights
+    import types
+
+    import equinox as eqx
+
+    import vdsbi.inference._build as build_module
+
+    theta, x, flow, _ = _tiny_problem(getkey, 64)
+    key = getkey()
+    first = build_flow(key, flow.prior, IdentityEmbedding(2), theta, x, TINY)
+    misses = build_module._init_program.cache_info().misses
+    again = build_flow(key, flow.prior, IdentityEmbedding(2), theta, x, TINY)
+    assert build_module._init_program.cache_info().misses == misses
+    assert tree_allclose(first, again, rtol=0, atol=0)
+
+    class Tagged(IdentityEmbedding):
+        tag: types.SimpleNamespace  # defines __eq__, so unhashable
+
+        def __init__(self, dim, tag):
+            super().__init__(dim)
+            self.tag = tag
+
+    odd = build_flow(key, flow.prior, Tagged(2, types.SimpleNamespace()), theta, x, TINY)
+    assert build_module._init_program.cache_info().misses == misses
+    assert tree_allclose(eqx.filter(odd, eqx.is_array), eqx.filter(first, eqx.is_array), rtol=0, atol=0)
+
+
 def test_npe_on_a_new_data_size_reuses_the_compiled_loops(getkey):
     # steps run in fixed-length padded blocks and validation in padded blocks (compiled on a
     # worker thread): a second NPE on more simulations traces neither loop again

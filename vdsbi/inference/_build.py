@@ -117,7 +117,11 @@ def _init_compiled(key: PRNGKeyArray, parts: tuple):
     """
     dynamic, static = eqx.partition(parts, eqx.is_array)
     leaves, treedef = jax.tree_util.tree_flatten(static)
-    arrays = _init_program(jax.default_backend(), treedef, tuple(leaves))(key, dynamic)
+    try:
+        program = _init_program(jax.default_backend(), treedef, tuple(leaves))
+    except TypeError:  # an unhashable non-array leaf (e.g. in a user's embedding): not cached
+        program = _init_program.__wrapped__(jax.default_backend(), treedef, tuple(leaves))
+    arrays = program(key, dynamic)
     shapes = eqx.filter_eval_shape(_make_estimator, key, *parts)
     static_out = eqx.filter(shapes, lambda a: isinstance(a, jax.ShapeDtypeStruct), inverse=True)
     return eqx.combine(arrays, static_out)
