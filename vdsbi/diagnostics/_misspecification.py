@@ -219,8 +219,23 @@ def locate_mismatch(
         `Localisation`.
     """
     res = np.asarray(residuals, dtype=float)
-    W, L, C = res.shape
     names = test.channels
+    chans, bands = _significant_cells(test, alpha)
+    win_excess, flagged = _window_excess(res, times, names, rate, window, smooth, alpha)
+    chans += [n for n in names if n not in chans and any(e > thr for _, _, e, thr in win_excess[n])]
+    return Localisation(
+        channels=[n for n in names if n in chans],
+        windows=_merge(flagged, gap=1.0 / rate + 1e-9),
+        bands_hz=bands,
+        channel_scores={n: float(test.z_scores[c].max()) for c, n in enumerate(names)},
+        window_excess={n: [row[:3] for row in rows] for n, rows in win_excess.items()},
+        whiteness=_whiteness(res, names, rate),
+        xcorr=_input_xcorr(res, inputs, names, input_names, rate, max_lag),
+    )
+
+
+def _significant_cells(test: MisspecificationTest, alpha: float) -> tuple[list[str], list[list[float]]]:
+    """Channels and frequency bands with a significant (channel, band) cell of ``test``."""
     n_cells = test.z_scores.size
     sig_cells = test.band_p <= max(alpha / n_cells, 1.0 / (1 + test.num_draws))
     # Per-cell significance: the simulated null is too coarse for alpha/n_cells; use the
@@ -228,12 +243,18 @@ def locate_mismatch(
     z_thr = stats.norm.isf(alpha / n_cells)
     sig_cells = sig_cells & (test.z_scores > z_thr)
     bands = [list(test.bands_hz[b]) for b in range(len(test.bands_hz)) if sig_cells[:, b].any()]
-    chans = [names[c] for c in range(C) if sig_cells[c].any()]
-    # Windows: moving average over `smooth`, mean square per window vs. its white expectation.
+    chans = [test.channels[c] for c in range(sig_cells.shape[0]) if sig_cells[c].any()]
+    return chans, bands
+
+
+def _window_excess(res, times, names, rate, window, smooth, alpha) -> tuple[dict, list]:
+    """Per channel, rows ``(t0, t1, excess, threshold)`` of the smoothed residual's mean square
+    per time window against its white expectation, and the ``(t0, t1)`` windows above it."""
+    W, L, C = res.shape
     m = max(1, int(round(smooth * rate)))
     kern = np.ones(m) / m
     nw = max(1, int(round(window * rate)))
-    win_excess: dict = {}
+    out: dict = {}
     flagged = []
     for c in range(C):
         rows = []
@@ -248,14 +269,16 @@ def locate_mismatch(
                 # χ²_k/k tail at level alpha / (number of windows × channels).
                 thr = stats.chi2.isf(alpha / max(1, C * W * (L // nw)), k) / k
                 t0, t1 = float(times[w, i0]), float(times[w, i1 - 1])
-                rows.append((t0, t1, excess))
+                rows.append((t0, t1, excess, thr))
                 if excess > thr:
                     flagged.append((t0, t1))
-                    if names[c] not in chans:
-                        chans.append(names[c])
-        win_excess[names[c]] = rows
-    windows = _merge(flagged, gap=1.0 / rate + 1e-9)
-    # Whiteness: Ljung–Box over lags up to 0.25 s.
+        out[names[c]] = rows
+    return out, flagged
+
+
+def _whiteness(res, names, rate) -> dict[str, float]:
+    """Per channel, the Ljung–Box p-value over lags up to 0.25 s, pooled over windows."""
+    W, L, C = res.shape
     h = max(2, int(round(0.25 * rate)))
     white = {}
     for c in range(C):
@@ -267,7 +290,13 @@ def locate_mismatch(
             q += L * (L + 2) * np.sum(ac**2 / (L - np.arange(1, h + 1)))
             n_tot += h
         white[names[c]] = float(stats.chi2.sf(q, n_tot))
-    # Residual–input cross-correlation, lag of the peak.
+    return white
+
+
+def _input_xcorr(res, inputs, names, input_names, rate, max_lag) -> dict:
+    """Per channel and input, the window-averaged residual–input cross-correlation's peak,
+    its lag and whether it exceeds 4/√(W·L)."""
+    W, L, C = res.shape
     lag_n = max(1, int(round(max_lag * rate)))
     thr_x = 4.0 / np.sqrt(W * L)
     xc: dict = {}
@@ -289,13 +318,4 @@ def locate_mismatch(
                 "lag_s": float((j - lag_n) / rate),
                 "significant": bool(abs(acc[j]) > thr_x),
             }
-    scores = {names[c]: float(test.z_scores[c].max()) for c in range(C)}
-    return Localisation(
-        channels=[n for n in names if n in chans],
-        windows=windows,
-        bands_hz=bands,
-        channel_scores=scores,
-        window_excess=win_excess,
-        whiteness=white,
-        xcorr=xc,
-    )
+    return xc
