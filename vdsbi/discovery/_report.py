@@ -211,6 +211,8 @@ def _json_default(o):
 
 
 def markdown(rep: dict) -> str:
+    """The report as Markdown: verdict, where, candidates, outside-library terms, held-out fit,
+    parameters, noise and what to run next."""
     L = [f"# Mismatch diagnosis: {rep['source']}", ""]
     if "verdict" in rep:
         L += [f"**Verdict: {rep['verdict']}.**", ""]
@@ -219,8 +221,14 @@ def markdown(rep: dict) -> str:
         f"Misspecification of the base model: {det} (p = {rep['p_value']:.4g} at α = {rep['alpha']:g}); "
         f"after the fix p = {rep['p_value_after']:.4g}."
     )
+    for section in (_md_located, _md_candidates, _md_terms, _md_fit, _md_parameters, _md_footer):
+        L += section(rep)
+    return "\n".join(L) + "\n"
+
+
+def _md_located(rep: dict) -> list[str]:
     loc = rep["located"]
-    L.append("")
+    L = [""]
     L.append(f"- channels: {', '.join(loc['channels']) or '—'}")
     L.append(f"- time windows (s): {', '.join(f'{a:.1f}–{b:.1f}' for a, b in loc['windows']) or '—'}")
     L.append(f"- bands (Hz): {', '.join(f'{a:g}–{b:g}' for a, b in loc['bands_hz']) or '—'}")
@@ -237,7 +245,11 @@ def markdown(rep: dict) -> str:
         "- residual whiteness (Ljung–Box p): "
         + ", ".join(f"{k} {v:.2g}" for k, v in loc["whiteness_p"].items())
     )
-    L += ["", "## Candidate explanations (log Bayes factor vs none, BIC)", ""]
+    return L
+
+
+def _md_candidates(rep: dict) -> list[str]:
+    L = ["", "## Candidate explanations (log Bayes factor vs none, BIC)", ""]
     L.append("| rank | candidate | score | probability | parameters (± std) |")
     L.append("|---|---|---|---|---|")
     for i, e in enumerate(rep["effects"][:12]):
@@ -256,6 +268,11 @@ def markdown(rep: dict) -> str:
     )
     for a in rep.get("ambiguous", []):
         L.append(f"- ambiguous: {a}")
+    return L
+
+
+def _md_terms(rep: dict) -> list[str]:
+    L = []
     if rep.get("discovered_terms"):
         L += ["", "## Outside the library: discovered terms", ""]
         L.append("| term | coefficient ± std | RMS change of the fit |")
@@ -268,7 +285,11 @@ def markdown(rep: dict) -> str:
     for g in rep["separability"]:
         for p in g["pairs"]:
             L.append(f"- {p['a']} vs {p['b']}: {p['verdict']}")
-    L += ["", "## Held-out fit (last part of each window, not used for fitting)", ""]
+    return L
+
+
+def _md_fit(rep: dict) -> list[str]:
+    L = ["", "## Held-out fit (last part of each window, not used for fitting)", ""]
     if rep.get("held_out_improved") is False:
         L.append(
             "**The chosen effect does not improve the held-out fit**: on the fitted part it is "
@@ -292,7 +313,11 @@ def markdown(rep: dict) -> str:
         after_t = rep["fit"]["after_terms"].items()
         text = ", ".join(f"{ch} NRMSE {d['nrmse']:.4f}, χ²/dof {d['chi2_dof']:.3f}" for ch, d in after_t)
         L.append(f"With the discovered terms: {text}.")
-    L += ["", "## Parameters", ""]
+    return L
+
+
+def _md_parameters(rep: dict) -> list[str]:
+    L = ["", "## Parameters", ""]
     if rep.get("at_bounds"):
         L.append(
             f"At the edge of their range after the fix: {', '.join(rep['at_bounds'])} — they are "
@@ -303,7 +328,11 @@ def markdown(rep: dict) -> str:
     for k, v in rep["theta"]["before"].items():
         sb, sa = rep["theta_std"]["before"][k], rep["theta_std"]["after"][k]
         L.append(f"| {k} | {v:.5g} ± {sb:.2g} | {rep['theta']['after'][k]:.5g} ± {sa:.2g} |")
-    L += [
+    return L
+
+
+def _md_footer(rep: dict) -> list[str]:
+    L = [
         "",
         f"Noise model: {rep['noise']['model']}; σ = "
         + ", ".join(f"{c} {s:.3g} ({rep['noise']['source'][c]})" for c, s in rep["noise"]["sigma"].items()),
@@ -323,7 +352,7 @@ def markdown(rep: dict) -> str:
             "",
             f"    {rep['identify_command']}",
         ]
-    return "\n".join(L) + "\n"
+    return L
 
 
 def write_report(result, out: Path, plots: bool = True) -> None:
