@@ -278,27 +278,6 @@ def test_later_rounds_are_capped_in_passes_over_their_new_data(getkey):
         NPEConfig(later_max_epochs=0)
 
 
-def test_min_patience_steps_floors_a_scaled_patience_in_steps():
-    # Round 10 of 10 x 1000 (900 training draws each, batch 128): 9000 // 128 = 70 steps per
-    # epoch; scaled patience ceil(20 / 10) = 2 epochs = 140 steps. A floor of 200 steps makes it
-    # ceil(200 / 70) = 3 epochs; at 10 x 100 (7 steps per epoch) the floor would be 29 epochs,
-    # capped at the unscaled 20, i.e. the "epochs" rule.
-    from vdsbi.inference._apt import _round_patience
-
-    def patience(per_round, floor):
-        cfg = NPEConfig(batch_size=128, patience=20, min_patience_steps=floor)
-        ids = np.repeat(np.arange(10), per_round)
-        is_val = np.zeros(ids.size, bool)
-        previous = {"epochs": 30, "max_epochs": 1000}  # the last round stopped early
-        return _round_patience(cfg, ids, is_val, 9, previous)
-
-    assert patience(900, 0) == 2
-    assert patience(900, 200) == 3
-    assert patience(90, 200) == 20 and patience(90, 0) == 2
-    with pytest.raises(ValueError, match="min_patience_steps"):
-        NPEConfig(min_patience_steps=-1)
-
-
 def test_patience_unit_is_checked():
     with pytest.raises(ValueError, match="patience_unit"):
         NPEConfig(patience_unit="steps")

@@ -20,7 +20,7 @@ from ._loss import AtomicLoss
 from ._posterior import Posterior, _log_prob, _sample
 from ._prior import BoxPrior
 from ._sharding import data_mesh
-from ._train import _batch_size, fit
+from ._train import fit
 
 
 def _truncated_prior(key, flow, prior, x_o, n, config) -> tuple[Array, dict]:
@@ -283,11 +283,8 @@ def _round_patience(
         return config.patience
     num_new, num_all = _new_and_all(round_ids, is_val, r)
     scaled = math.ceil(config.patience * num_new / num_all)
-    # device-independent steps per epoch (one device's batch), so patience does not vary with sharding
-    steps_per_epoch = max(1, num_all // _batch_size(config.batch_size, num_all, 1))
-    floor = math.ceil(config.min_patience_steps / steps_per_epoch)
     # at least two epochs: one noisy validation epoch must not end a round
-    return min(config.patience, max(_MIN_PATIENCE, scaled, floor))
+    return min(config.patience, max(_MIN_PATIENCE, scaled))
 
 
 def _new_and_all(round_ids: np.ndarray, is_val: np.ndarray, r: int) -> tuple[int, int]:

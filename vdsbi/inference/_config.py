@@ -44,10 +44,6 @@ class NPEConfig:
             epochs. The same as ``"epochs"`` in round 1, for NPE, with ``retrain_from_scratch``
             and after a round that ran out of ``max_epochs``. APT two_moons at 10⁴, sbibm
             observation 1: 243 → 65 s, C2ST 0.548 → 0.552 (``benchmarks/results/apt_patience/``).
-        min_patience_steps: opt-in floor for ``patience_unit="new_data"``: a scaled patience never
-            waits fewer than this many gradient steps (never more than ``patience`` epochs). The
-            validation loss's noise is per step, not per epoch: with small rounds (10 x 100) two
-            epochs are 16 steps, and rounds then stopped on noise. 0 (default): no floor.
         ensemble: number of flows trained at once (vmapped over members, each on its own loss,
             differing by initialisation); the posterior is their equal-weight mixture
             (`FlowEnsemble`). 1 (default): a single `ConditionalFlow`.
@@ -86,7 +82,6 @@ class NPEConfig:
     max_epochs: int = 1000
     patience: int = 20
     patience_unit: Literal["epochs", "new_data"] = "new_data"
-    min_patience_steps: int = 0
     lr_schedule: Literal["constant", "cosine"] = "constant"
     later_max_epochs: int | None = None
     ensemble: int = 1
@@ -115,8 +110,6 @@ class NPEConfig:
             )
         if self.patience_unit not in ("epochs", "new_data"):
             raise ValueError(f"patience_unit must be 'epochs' or 'new_data', got {self.patience_unit!r}")
-        if self.min_patience_steps < 0:
-            raise ValueError(f"min_patience_steps must be >= 0, got {self.min_patience_steps}")
         if not 0.0 < self.validation_fraction < 1.0:
             raise ValueError("validation_fraction must be in (0, 1)")
         if self.lr_schedule not in ("constant", "cosine"):
