@@ -366,14 +366,27 @@ def write_report(result, out: Path, plots: bool = True) -> None:
 
 
 def write_plots(result, out: Path) -> None:
+    """residual_heatmap.png, overlay.png and residual_spectra.png in ``out``."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    plots = {
+        "residual_heatmap.png": _plot_residual_heatmap,
+        "overlay.png": _plot_overlay,
+        "residual_spectra.png": _plot_residual_spectra,
+    }
+    for name, plot in plots.items():
+        fig = plot(plt, result)
+        fig.savefig(out / name, dpi=110, bbox_inches="tight")
+        plt.close(fig)
+
+
+def _plot_residual_heatmap(plt, result):
+    """Channel × time, the low-passed whitened residual of the base fit."""
     win = result.windows
     chans = win.channels
-    # Residual heat map: channel × time, low-passed whitened residual of the base fit.
     res = result.residual_stretches["before"]
     ts = result.residual_stretches["t"]
     dt = win.compared_dt
@@ -403,9 +416,13 @@ def write_plots(result, out: Path) -> None:
         ax.set_xlabel("t [s]")
     fig.colorbar(im, ax=axes[0, -1], label="whitened residual, 0.25 s mean")
     fig.suptitle("Base-model residual (training part)")
-    fig.savefig(out / "residual_heatmap.png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    # Before/after overlays per channel.
+    return fig
+
+
+def _plot_overlay(plt, result):
+    """Measured, before and after per channel; held-out parts shaded."""
+    win = result.windows
+    chans = win.channels
     p0, p1 = result.predictions["before"], result.predictions["after"]
     fig, axes = plt.subplots(len(chans), 1, figsize=(10, 1.8 * len(chans)), sharex=True, squeeze=False)
     for c, name in enumerate(chans):
@@ -422,9 +439,13 @@ def write_plots(result, out: Path) -> None:
         ax.set_ylabel(name)
     axes[0, 0].legend(loc="upper right", fontsize=7, ncol=3)
     axes[-1, 0].set_xlabel("t [s] (grey: held out)")
-    fig.savefig(out / "overlay.png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    # Residual spectra before/after.
+    return fig
+
+
+def _plot_residual_spectra(plt, result):
+    """Residual power spectra before and after, against the white-noise level."""
+    chans = result.windows.channels
+    dt = result.windows.compared_dt
     fig, axes = plt.subplots(len(chans), 1, figsize=(8, 1.6 * len(chans)), sharex=True, squeeze=False)
     for key, col in (("before", "C3"), ("after", "C0")):
         r = result.residual_stretches[key]
@@ -437,5 +458,4 @@ def write_plots(result, out: Path) -> None:
         axes[c, 0].axhline(1.0, color="k", ls=":", lw=0.8)
     axes[0, 0].legend(fontsize=7)
     axes[-1, 0].set_xlabel("frequency [Hz] (dotted: white noise level)")
-    fig.savefig(out / "residual_spectra.png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
+    return fig
