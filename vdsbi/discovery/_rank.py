@@ -180,63 +180,68 @@ def separability(ranked: Sequence[Ranked], base: FitResult) -> list[dict]:
         members = [g for g in group if g in singles]
         entry: dict = {"group": list(group), "pairs": []}
         if "cornering_stiffness" in group and "steering_lag" in singles:
-            lag = singles["steering_lag"]
-            sig = lag.fit.residual - base.residual
-            cols = base.jacobian[:, [i for i, f in enumerate(base.free) if f in (4, 5)]]
-            if cols.size and np.linalg.norm(sig) > 0:
-                coef, *_ = np.linalg.lstsq(cols, sig, rcond=None)
-                share = float(np.linalg.norm(cols @ coef) ** 2 / np.linalg.norm(sig) ** 2)
-            else:
-                share = 0.0
-            sep = lag.score >= STRONG or (lag.score < STRONG and share < 0.9)
-            reason = (
-                f"a steering lag adds log-evidence {lag.score:.1f} beyond re-fitting C_alpha; "
-                f"{100 * share:.0f}% of its signature lies in the span of the cornering-stiffness "
-                "directions"
-            )
-            if lag.score < STRONG and share >= 0.9:
-                reason = "not separable on this recording: " + reason
-            entry["pairs"].append(
-                {
-                    "a": "steering_lag",
-                    "b": "cornering_stiffness",
-                    "signature_share": share,
-                    "evidence_gap": lag.score,
-                    "separable": bool(sep),
-                    "verdict": reason,
-                }
-            )
+            entry["pairs"].append(_lag_vs_stiffness(singles["steering_lag"], base))
         for i, a in enumerate(members):
             for b in members[i + 1 :]:
-                ra, rb = singles[a], singles[b]
-                rho = _cos(ra.fit.residual - base.residual, rb.fit.residual - base.residual)
-                gap = ra.score - rb.score
-                best, other = (a, b) if gap >= 0 else (b, a)
-                relevant = max(ra.score, rb.score) >= STRONG
-                if not relevant:
-                    verdict = f"neither {a} nor {b} is supported (evidence < {STRONG:g})"
-                    sep = True
-                elif abs(gap) >= STRONG:
-                    verdict = (
-                        f"separable: {best} preferred over {other} by log-evidence {abs(gap):.1f} "
-                        f"(fitted signatures correlate {rho:+.2f})"
-                    )
-                    sep = True
-                else:
-                    verdict = (
-                        f"not separable on this recording: fitted signatures correlate {rho:+.2f} "
-                        f"and the evidence gap is only {abs(gap):.1f} (< {STRONG:g})"
-                    )
-                    sep = False
-                entry["pairs"].append(
-                    {
-                        "a": a,
-                        "b": b,
-                        "signature_correlation": rho,
-                        "evidence_gap": abs(gap),
-                        "separable": bool(sep),
-                        "verdict": verdict,
-                    }
-                )
+                entry["pairs"].append(_pair_verdict(a, b, singles[a], singles[b], base))
         out.append(entry)
     return out
+
+
+def _lag_vs_stiffness(lag: Ranked, base: FitResult) -> dict:
+    """steering_lag against a cornering-stiffness change: the share of the lag's signature in
+    the span of the base fit's C_alpha_f, C_alpha_r Jacobian columns."""
+    sig = lag.fit.residual - base.residual
+    cols = base.jacobian[:, [i for i, f in enumerate(base.free) if f in (4, 5)]]
+    if cols.size and np.linalg.norm(sig) > 0:
+        coef, *_ = np.linalg.lstsq(cols, sig, rcond=None)
+        share = float(np.linalg.norm(cols @ coef) ** 2 / np.linalg.norm(sig) ** 2)
+    else:
+        share = 0.0
+    sep = lag.score >= STRONG or share < 0.9
+    reason = (
+        f"a steering lag adds log-evidence {lag.score:.1f} beyond re-fitting C_alpha; "
+        f"{100 * share:.0f}% of its signature lies in the span of the cornering-stiffness "
+        "directions"
+    )
+    if not sep:
+        reason = "not separable on this recording: " + reason
+    return {
+        "a": "steering_lag",
+        "b": "cornering_stiffness",
+        "signature_share": share,
+        "evidence_gap": lag.score,
+        "separable": bool(sep),
+        "verdict": reason,
+    }
+
+
+def _pair_verdict(a: str, b: str, ra: Ranked, rb: Ranked, base: FitResult) -> dict:
+    """Whether single effects ``a`` and ``b`` can be told apart: by evidence, with the
+    correlation of their fitted signatures as the reason when they cannot."""
+    rho = _cos(ra.fit.residual - base.residual, rb.fit.residual - base.residual)
+    gap = ra.score - rb.score
+    best, other = (a, b) if gap >= 0 else (b, a)
+    if max(ra.score, rb.score) < STRONG:
+        verdict = f"neither {a} nor {b} is supported (evidence < {STRONG:g})"
+        sep = True
+    elif abs(gap) >= STRONG:
+        verdict = (
+            f"separable: {best} preferred over {other} by log-evidence {abs(gap):.1f} "
+            f"(fitted signatures correlate {rho:+.2f})"
+        )
+        sep = True
+    else:
+        verdict = (
+            f"not separable on this recording: fitted signatures correlate {rho:+.2f} "
+            f"and the evidence gap is only {abs(gap):.1f} (< {STRONG:g})"
+        )
+        sep = False
+    return {
+        "a": a,
+        "b": b,
+        "signature_correlation": rho,
+        "evidence_gap": abs(gap),
+        "separable": bool(sep),
+        "verdict": verdict,
+    }
