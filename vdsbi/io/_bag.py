@@ -167,40 +167,10 @@ def read_bag_columns(
     from rosbags.highlevel import AnyReader
 
     source = str(path)
-    series: dict[str, tuple[list[int], list[float]]] = {}
     try:
         with AnyReader([Path(path)], default_typestore=autoware_typestore()) as reader:
-            topics = {c.topic: c for c in reader.connections}
-            wanted: dict[str, list[tuple[str, TopicField]]] = {}
-            for col in (*INPUTS, *CHANNELS):
-                spec = topic_map.get(col)
-                if spec is None:
-                    continue
-                if spec.topic not in topics:
-                    if col == "steer" or spec.origin:  # required, or asked for explicitly
-                        have = ", ".join(sorted(topics)) or "none"
-                        raise InputError(
-                            source,
-                            col,
-                            f"{spec.describe()} not in bag (topics: {have}); map it with --topic-map",
-                        )
-                    continue  # a measured channel or the torque pair may be absent
-                wanted.setdefault(spec.topic, []).append((col, spec))
-                series[col] = ([], [])
-            conns = [topics[tp] for tp in wanted]
-            for conn, stamp, raw in reader.messages(connections=conns):
-                msg = reader.deserialize(raw, conn.msgtype)
-                for col, spec in wanted[conn.topic]:
-                    try:
-                        value = _get(msg, spec.field) * spec.scale
-                    except (AttributeError, IndexError, TypeError, ValueError):
-                        raise InputError(
-                            source,
-                            col,
-                            f"{spec.describe()} ({conn.msgtype}) has no numeric field '{spec.field}'",
-                        ) from None
-                    series[col][0].append(stamp)
-                    series[col][1].append(value)
+            wanted = _wanted_topics(source, {c.topic: c for c in reader.connections}, topic_map)
+            series = _read_series(source, reader, wanted)
     except InputError:
         raise
     except Exception as err:  # rosbags, sqlite3, mcap and struct errors on corrupt files
@@ -209,6 +179,57 @@ def read_bag_columns(
             source, "bag", f"cannot read ROS2 bag ({type(err).__name__}: {msg}); truncated or corrupt?"
         ) from None
     present = {c: s for c, s in series.items() if len(s[0]) > 0}
+    _check_present(source, topic_map, series, present)
+    return _resample(source, topic_map, present, rate)
+
+
+def _wanted_topics(source: str, topics: dict, topic_map: Mapping[str, TopicField]) -> dict:
+    """``{topic: [(column, field), ...]}`` for the mapped columns whose topic the bag has; a
+    missing topic is an error for `steer` and for topics named explicitly."""
+    wanted: dict[str, list[tuple[str, TopicField]]] = {}
+    for col in (*INPUTS, *CHANNELS):
+        spec = topic_map.get(col)
+        if spec is None:
+            continue
+        if spec.topic not in topics:
+            if col == "steer" or spec.origin:  # required, or asked for explicitly
+                have = ", ".join(sorted(topics)) or "none"
+                raise InputError(
+                    source,
+                    col,
+                    f"{spec.describe()} not in bag (topics: {have}); map it with --topic-map",
+                )
+            continue  # a measured channel or the torque pair may be absent
+        wanted.setdefault(spec.topic, []).append((col, spec))
+    return wanted
+
+
+def _read_series(source: str, reader, wanted: dict) -> dict[str, tuple[list[int], list[float]]]:
+    """Per wanted column, its messages' receive stamps (ns) and scaled field values."""
+    mapped = {col for cols in wanted.values() for col, _ in cols}
+    series: dict[str, tuple[list[int], list[float]]] = {
+        col: ([], []) for col in (*INPUTS, *CHANNELS) if col in mapped
+    }
+    topics = {c.topic: c for c in reader.connections}
+    for conn, stamp, raw in reader.messages(connections=[topics[tp] for tp in wanted]):
+        msg = reader.deserialize(raw, conn.msgtype)
+        for col, spec in wanted[conn.topic]:
+            try:
+                value = _get(msg, spec.field) * spec.scale
+            except (AttributeError, IndexError, TypeError, ValueError):
+                raise InputError(
+                    source,
+                    col,
+                    f"{spec.describe()} ({conn.msgtype}) has no numeric field '{spec.field}'",
+                ) from None
+            series[col][0].append(stamp)
+            series[col][1].append(value)
+    return series
+
+
+def _check_present(source: str, topic_map, series: dict, present: dict) -> None:
+    """Steering and explicitly mapped inputs have messages; the torques come as a pair; without
+    torques a speed channel is there."""
     for col in INPUTS:
         if col in series and col not in present and (col == "steer" or topic_map[col].origin):
             raise InputError(source, col, f"{topic_map[col].describe()} has no messages")
@@ -222,6 +243,11 @@ def read_bag_columns(
             + (" or ".join(wanted) if wanted else "vx or the wheel speeds")
             + " with messages; map it with --topic-map",
         )
+
+
+def _resample(source: str, topic_map, present: dict, rate: float) -> dict[str, np.ndarray]:
+    """Every column interpolated onto the uniform grid at ``rate`` over the span all cover;
+    a gap longer than `MAX_TOPIC_GAP` inside it is an error."""
     t0 = max(min(s[0]) for s in present.values()) * 1e-9
     t1 = min(max(s[0]) for s in present.values()) * 1e-9
     if not t1 > t0:
