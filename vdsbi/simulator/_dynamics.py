@@ -205,13 +205,10 @@ class VehicleModel(eqx.Module):
         vx, vy, r, wf, wr, a_f_hat, a_r_hat, k_f_hat, k_r_hat = (y[i] for i in range(9))
         zs = self._effect_states(y)
         u_cmd = inputs(t)
-        u = u_cmd
-        for e, p, z in zip(self.effects, effect_params, zs):
-            u = e.inputs(p, z, u)
+        u = self._received_inputs(effect_params, zs, u_cmd)
         delta, torque_f, torque_r = u[0], u[1], u[2]
         l_f, h, ckf, ckr, caf, car = (theta[i] for i in range(6))
         l_r = L - l_f
-        i_z = self.yaw_inertia(theta, effect_params)
         r_free = self.radius(effect_params)
         fz_f0, fz_r0 = self.static_loads(theta)
         zero = jnp.zeros_like(vx)
@@ -264,19 +261,13 @@ class VehicleModel(eqx.Module):
         a_x = (fx_f * cos_d - fy_f * sin_d + fx_r + fbx) / m
         a_y = (fx_f * sin_d + fy_f * cos_d + fy_r + fby) / m
 
-        # Eq. 2, 4, 5: slip angles from contact-patch velocities; Vx floored at V_FLOOR
-        # because eq. 2–3 are singular at standstill.
-        vx_pos = jnp.maximum(vx, V_FLOOR)
-        alpha_f = delta - arctan((vy + l_f * r) / vx_pos)
-        alpha_r = -arctan((vy - l_r * r) / vx_pos)
+        alpha_f, alpha_r, rate = self._slip_angles(delta, vx, vy, r, l_f, l_r)
         # Eq. 3, each wheel's longitudinal speed taken as Vx (seed: V_xf = V_xr = V_x).
         ctx = context(fz_f, fz_r, zero)._replace(ax=a_x, ay=a_y)
         rw_f = ctx.r_eff_front * wf
         rw_r = ctx.r_eff_rear * wr
         kappa_f = (rw_f - vx) / jnp.maximum(jnp.maximum(rw_f, vx), V_FLOOR)
         kappa_r = (rw_r - vx) / jnp.maximum(jnp.maximum(rw_r, vx), V_FLOOR)
-        # Eq. 13 for α̂ and, by the seed's analogy, κ̂ with the same σ_l.
-        rate = jnp.maximum(vx, 0.0) / veh.relaxation_length
 
         tq_f, tq_r = torque_f, torque_r
         for e, p in zip(self.effects, effect_params):
@@ -288,8 +279,7 @@ class VehicleModel(eqx.Module):
         # Eq. 1 in body axes; gravity components of grade/bank add to the motion only.
         dvx = a_x + gx + vy * r
         dvy = a_y + gy - vx * r
-        m_z = self.yaw_moment(effect_params, ctx)
-        dr = (l_f * (fx_f * sin_d + fy_f * cos_d) - l_r * fy_r + m_z) / i_z
+        dr = self._yaw_acceleration(theta, effect_params, ctx, (fx_f, fy_f, fy_r), delta)
         d_base = jnp.stack(
             [
                 dvx,
@@ -303,21 +293,7 @@ class VehicleModel(eqx.Module):
                 rate * (kappa_r - k_r_hat),
             ]
         )
-        d_extra = [e.state_rhs(p, z, u_cmd) for e, p, z in zip(self.effects, effect_params, zs)]
-        dy = jnp.concatenate([d_base, *d_extra]) if d_extra else d_base
-
-        readings = {
-            "ax": a_x,
-            "ay": a_y,
-            "yaw_rate": r,
-            "omega_front": wf,
-            "omega_rear": wr,
-            "vx": vx,
-        }
-        ctx = ctx._replace(r_dot=dr)
-        for e, p in zip(self.effects, effect_params):
-            readings = e.measure(p, readings, ctx)
-        return dy, jnp.stack([readings[c] for c in CHANNELS])
+        return self._with_effects(d_base, effect_params, zs, u_cmd, ctx._replace(r_dot=dr))
 
     def _evaluate_speed(self, t, y, args: Args):
         # Speed mode (see the class docstring): Vx and a_x are measured, κ = 0, no wheel torques.
@@ -329,13 +305,10 @@ class VehicleModel(eqx.Module):
         vx, dvx, a_x = inputs.longitudinal(t)
         zs = self._effect_states(y)
         u_cmd = inputs(t)
-        u = u_cmd
-        for e, p, z in zip(self.effects, effect_params, zs):
-            u = e.inputs(p, z, u)
+        u = self._received_inputs(effect_params, zs, u_cmd)
         delta = u[0]
         l_f, _, _, _, caf, car = (theta[i] for i in range(6))
         l_r = L - l_f
-        i_z = self.yaw_inertia(theta, effect_params)
         r_free = self.radius(effect_params)
         # Eq. 11 with the measured specific force: no fixed point to solve.
         fz_f, fz_r = self.loads(theta, a_x)
@@ -369,15 +342,11 @@ class VehicleModel(eqx.Module):
         fx_r, fy_r = dugoff_with_load(dugoff_demand(theta[3], car, zero, a_r_hat), fz_r, mu_r)
         a_y = (fx_f * sin_d + fy_f * cos_d + fy_r + fby) / m
 
-        vx_pos = jnp.maximum(vx, V_FLOOR)
-        alpha_f = delta - arctan((vy + l_f * r) / vx_pos)
-        alpha_r = -arctan((vy - l_r * r) / vx_pos)
-        rate = jnp.maximum(vx, 0.0) / veh.relaxation_length
+        alpha_f, alpha_r, rate = self._slip_angles(delta, vx, vy, r, l_f, l_r)
 
         dvy = a_y + gy - vx * r
         ctx = ctx._replace(ax=a_x, ay=a_y)
-        m_z = self.yaw_moment(effect_params, ctx)
-        dr = (l_f * (fx_f * sin_d + fy_f * cos_d) - l_r * fy_r + m_z) / i_z
+        dr = self._yaw_acceleration(theta, effect_params, ctx, (fx_f, fy_f, fy_r), delta)
         d_base = jnp.stack(
             [
                 dvx,
@@ -392,18 +361,46 @@ class VehicleModel(eqx.Module):
                 zero,
             ]
         )
+        return self._with_effects(d_base, effect_params, zs, u_cmd, ctx._replace(r_dot=dr))
+
+    def _received_inputs(self, effect_params, zs, u_cmd):
+        """The driver inputs as the vehicle receives them (after the effects' input transforms)."""
+        u = u_cmd
+        for e, p, z in zip(self.effects, effect_params, zs):
+            u = e.inputs(p, z, u)
+        return u
+
+    def _slip_angles(self, delta, vx, vy, r, l_f, l_r):
+        """Eq. 2, 4, 5: slip angles from contact-patch velocities, and eq. 13's relaxation rate
+        Vx/σ_l (for α̂ and, by the seed's analogy, κ̂ with the same σ_l)."""
+        # Vx floored at V_FLOOR because eq. 2–3 are singular at standstill.
+        vx_pos = jnp.maximum(vx, V_FLOOR)
+        alpha_f = delta - arctan((vy + l_f * r) / vx_pos)
+        alpha_r = -arctan((vy - l_r * r) / vx_pos)
+        return alpha_f, alpha_r, jnp.maximum(vx, 0.0) / self.vehicle.relaxation_length
+
+    def _yaw_acceleration(self, theta, effect_params, ctx: Context, forces, delta):
+        """Eq. 1's yaw equation: axle lateral forces about the CoG plus the effects' moments."""
+        fx_f, fy_f, fy_r = forces
+        l_f = theta[0]
+        l_r = self.vehicle.wheelbase - l_f
+        m_z = self.yaw_moment(effect_params, ctx)
+        lateral_f = fx_f * jnp.sin(delta) + fy_f * jnp.cos(delta)
+        return (l_f * lateral_f - l_r * fy_r + m_z) / self.yaw_inertia(theta, effect_params)
+
+    def _with_effects(self, d_base, effect_params, zs, u_cmd, ctx: Context):
+        """The effects' state derivatives appended to the base ones, and the sensor readings
+        after the effects' measurement models, in CHANNELS order."""
         d_extra = [e.state_rhs(p, z, u_cmd) for e, p, z in zip(self.effects, effect_params, zs)]
         dy = jnp.concatenate([d_base, *d_extra]) if d_extra else d_base
-
         readings = {
-            "ax": a_x,
-            "ay": a_y,
-            "yaw_rate": r,
+            "ax": ctx.ax,
+            "ay": ctx.ay,
+            "yaw_rate": ctx.r,
             "omega_front": ctx.omega_front,
             "omega_rear": ctx.omega_rear,
-            "vx": vx,
+            "vx": ctx.vx,
         }
-        ctx = ctx._replace(r_dot=dr)
         for e, p in zip(self.effects, effect_params):
             readings = e.measure(p, readings, ctx)
         return dy, jnp.stack([readings[c] for c in CHANNELS])
