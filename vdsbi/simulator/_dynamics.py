@@ -207,29 +207,12 @@ class VehicleModel(eqx.Module):
         u_cmd = inputs(t)
         u = self._received_inputs(effect_params, zs, u_cmd)
         delta, torque_f, torque_r = u[0], u[1], u[2]
-        l_f, h, ckf, ckr, caf, car = (theta[i] for i in range(6))
+        l_f, _, ckf, ckr, caf, car = (theta[i] for i in range(6))
         l_r = L - l_f
         r_free = self.radius(effect_params)
         fz_f0, fz_r0 = self.static_loads(theta)
         zero = jnp.zeros_like(vx)
-
-        def context(fz_f, fz_r, r_dot):
-            return Context(
-                vx=vx,
-                vy=vy,
-                r=r,
-                r_dot=r_dot,
-                fz_front=fz_f,
-                fz_rear=fz_r,
-                r_eff_front=self.effective_radius(r_free, fz_f),
-                r_eff_rear=self.effective_radius(r_free, fz_r),
-                omega_front=wf,
-                omega_rear=wr,
-                mass=jnp.asarray(m),
-                gravity=GRAVITY,
-            )
-
-        ctx0 = context(fz_f0, fz_r0, zero)
+        ctx0 = self._context(y, r_free, fz_f0, fz_r0, zero)
         fbx, fby, gx, gy = zero, zero, zero, zero
         for e, p in zip(self.effects, effect_params):
             bx, by = e.body_force(p, ctx0)
@@ -237,33 +220,15 @@ class VehicleModel(eqx.Module):
             fbx, fby, gx, gy = fbx + bx, fby + by, gx + ax_g, gy + ay_g
 
         cos_d, sin_d = jnp.cos(delta), jnp.sin(delta)
-
-        demand_f = dugoff_demand(ckf, caf, k_f_hat, a_f_hat)
-        demand_r = dugoff_demand(ckr, car, k_r_hat, a_r_hat)
-
-        def tire_forces(a_x):
-            # Eq. 11 with the specific force a_x (the seed's ± sign: load moves rearwards
-            # under acceleration).
-            fz_f = fz_f0 - m * h * a_x / L
-            fz_r = fz_r0 + m * h * a_x / L
-            fx_f, fy_f = dugoff_with_load(demand_f, fz_f, mu_f)
-            fx_r, fy_r = dugoff_with_load(demand_r, fz_r, mu_r)
-            a_x_new = (fx_f * cos_d - fy_f * sin_d + fx_r + fbx) / m
-            return a_x_new, (fz_f, fz_r, fx_f, fy_f, fx_r, fy_r)
-
-        # A rolled loop on purpose: its outputs are materialised once. Unrolled, XLA's loop
-        # fusion re-derives the whole load/Dugoff chain (tan included) inside each of the nine
-        # derivative kernels, which made the batched RHS several times slower.
-        _, forces = jax.lax.fori_loop(
-            0, LOAD_ITERATIONS - 1, lambda _, c: tire_forces(c[0]), tire_forces(zero)
-        )
+        demands = (dugoff_demand(ckf, caf, k_f_hat, a_f_hat), dugoff_demand(ckr, car, k_r_hat, a_r_hat))
+        forces = self._loaded_tire_forces(theta, demands, (mu_f, mu_r), (cos_d, sin_d), fbx)
         fz_f, fz_r, fx_f, fy_f, fx_r, fy_r = forces
         a_x = (fx_f * cos_d - fy_f * sin_d + fx_r + fbx) / m
         a_y = (fx_f * sin_d + fy_f * cos_d + fy_r + fby) / m
 
         alpha_f, alpha_r, rate = self._slip_angles(delta, vx, vy, r, l_f, l_r)
         # Eq. 3, each wheel's longitudinal speed taken as Vx (seed: V_xf = V_xr = V_x).
-        ctx = context(fz_f, fz_r, zero)._replace(ax=a_x, ay=a_y)
+        ctx = self._context(y, r_free, fz_f, fz_r, zero)._replace(ax=a_x, ay=a_y)
         rw_f = ctx.r_eff_front * wf
         rw_r = ctx.r_eff_rear * wr
         kappa_f = (rw_f - vx) / jnp.maximum(jnp.maximum(rw_f, vx), V_FLOOR)
@@ -362,6 +327,50 @@ class VehicleModel(eqx.Module):
             ]
         )
         return self._with_effects(d_base, effect_params, zs, u_cmd, ctx._replace(r_dot=dr))
+
+    def _context(self, y, r_free, fz_f, fz_r, r_dot) -> Context:
+        """What effects see in torque mode: the base states with axle loads ``fz_*``."""
+        vx, vy, r, wf, wr = (y[i] for i in range(5))
+        return Context(
+            vx=vx,
+            vy=vy,
+            r=r,
+            r_dot=r_dot,
+            fz_front=fz_f,
+            fz_rear=fz_r,
+            r_eff_front=self.effective_radius(r_free, fz_f),
+            r_eff_rear=self.effective_radius(r_free, fz_r),
+            omega_front=wf,
+            omega_rear=wr,
+            mass=jnp.asarray(self.vehicle.mass),
+            gravity=GRAVITY,
+        )
+
+    def _loaded_tire_forces(self, theta, demands, mu, cos_sin, fbx):
+        """Eq. 11 and the Dugoff forces solved together: ``(fz_f, fz_r, fx_f, fy_f, fx_r, fy_r)``.
+
+        The loads follow the specific force a_x (the seed's ± sign: load moves rearwards under
+        acceleration), which the tire forces make: a fixed point, `LOAD_ITERATIONS` passes.
+        """
+        m, L, h = self.vehicle.mass, self.vehicle.wheelbase, theta[1]
+        fz_f0, fz_r0 = self.static_loads(theta)
+        cos_d, sin_d = cos_sin
+
+        def tire_forces(a_x):
+            fz_f = fz_f0 - m * h * a_x / L
+            fz_r = fz_r0 + m * h * a_x / L
+            fx_f, fy_f = dugoff_with_load(demands[0], fz_f, mu[0])
+            fx_r, fy_r = dugoff_with_load(demands[1], fz_r, mu[1])
+            a_x_new = (fx_f * cos_d - fy_f * sin_d + fx_r + fbx) / m
+            return a_x_new, (fz_f, fz_r, fx_f, fy_f, fx_r, fy_r)
+
+        # A rolled loop on purpose: its outputs are materialised once. Unrolled, XLA's loop
+        # fusion re-derives the whole load/Dugoff chain (tan included) inside each of the nine
+        # derivative kernels, which made the batched RHS several times slower.
+        _, forces = jax.lax.fori_loop(
+            0, LOAD_ITERATIONS - 1, lambda _, c: tire_forces(c[0]), tire_forces(jnp.zeros_like(fbx))
+        )
+        return forces
 
     def _received_inputs(self, effect_params, zs, u_cmd):
         """The driver inputs as the vehicle receives them (after the effects' input transforms)."""
