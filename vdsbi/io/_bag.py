@@ -337,20 +337,9 @@ def write_bag(
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     store = autoware_typestore()
-    ns = store.types
     Time = store.types["builtin_interfaces/msg/Time"]
-    Header = store.types["std_msgs/msg/Header"]
-    Vector3 = store.types["geometry_msgs/msg/Vector3"]
-    Quaternion = store.types["geometry_msgs/msg/Quaternion"]
     ch = rec.channels
-    zero = np.zeros(rec.num_samples)
-    cov = np.zeros(9)
     plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
-
-    def stamp(k: int):
-        total = start_ns + int(round(float(rec.t[k] - rec.t[0]) * 1e9))
-        return total, Time(sec=total // 10**9, nanosec=total % 10**9)
-
     topics = {
         "/sensing/imu/imu_data": "sensor_msgs/msg/Imu",
         "/vehicle/status/velocity_status": "autoware_vehicle_msgs/msg/VelocityReport",
@@ -365,45 +354,55 @@ def write_bag(
         skip = (*skip, "/vdsbi/wheel_speeds")
     if not rec.has_torques:
         skip = (*skip, "/vdsbi/torque_front", "/vdsbi/torque_rear")
-    layout = ns["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
     with Writer(path, version=9, storage_plugin=plugin) as writer:
         conns = {
             tp: writer.add_connection(tp, ty, typestore=store) for tp, ty in topics.items() if tp not in skip
         }
         for k in range(rec.num_samples):
-            total, tm = stamp(k)
-            hdr = Header(stamp=tm, frame_id="base_link")
-            msgs = {
-                "/sensing/imu/imu_data": ns["sensor_msgs/msg/Imu"](
-                    header=hdr,
-                    orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
-                    orientation_covariance=cov,
-                    angular_velocity=Vector3(x=0.0, y=0.0, z=float(ch.get("yaw_rate", zero)[k])),
-                    angular_velocity_covariance=cov,
-                    linear_acceleration=Vector3(
-                        x=float(ch.get("ax", zero)[k]), y=float(ch.get("ay", zero)[k]), z=9.81
-                    ),
-                    linear_acceleration_covariance=cov,
-                ),
-                "/vehicle/status/steering_status": ns["autoware_vehicle_msgs/msg/SteeringReport"](
-                    stamp=tm, steering_tire_angle=float(rec.steer[k])
-                ),
-            }
-            if rec.has_torques:
-                msgs["/vdsbi/torque_front"] = ns["std_msgs/msg/Float64"](data=float(rec.torque_front[k]))
-                msgs["/vdsbi/torque_rear"] = ns["std_msgs/msg/Float64"](data=float(rec.torque_rear[k]))
-            if "/vehicle/status/velocity_status" in conns:
-                msgs["/vehicle/status/velocity_status"] = ns["autoware_vehicle_msgs/msg/VelocityReport"](
-                    header=hdr,
-                    longitudinal_velocity=float(ch["vx"][k]),
-                    lateral_velocity=0.0,
-                    heading_rate=0.0,
-                )
-            if "/vdsbi/wheel_speeds" in conns:
-                msgs["/vdsbi/wheel_speeds"] = ns["std_msgs/msg/Float64MultiArray"](
-                    layout=layout,
-                    data=np.array([ch["omega_front"][k], ch["omega_rear"][k]], dtype=np.float64),
-                )
-            for tp, msg in msgs.items():
+            total = start_ns + int(round(float(rec.t[k] - rec.t[0]) * 1e9))
+            tm = Time(sec=total // 10**9, nanosec=total % 10**9)
+            for tp, msg in _sample_messages(store, rec, k, tm, conns).items():
                 if tp in conns:
                     writer.write(conns[tp], total, store.serialize_cdr(msg, conns[tp].msgtype))
+
+
+def _sample_messages(store, rec: Recording, k: int, tm, conns: dict) -> dict:
+    """Sample ``k`` of ``rec`` as one message per topic (those in ``conns`` where optional)."""
+    ns = store.types
+    Vector3 = ns["geometry_msgs/msg/Vector3"]
+    ch = rec.channels
+    cov = np.zeros(9)
+
+    def reading(name):
+        return float(ch[name][k]) if name in ch else 0.0
+
+    msgs = {
+        "/sensing/imu/imu_data": ns["sensor_msgs/msg/Imu"](
+            header=ns["std_msgs/msg/Header"](stamp=tm, frame_id="base_link"),
+            orientation=ns["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+            orientation_covariance=cov,
+            angular_velocity=Vector3(x=0.0, y=0.0, z=reading("yaw_rate")),
+            angular_velocity_covariance=cov,
+            linear_acceleration=Vector3(x=reading("ax"), y=reading("ay"), z=9.81),
+            linear_acceleration_covariance=cov,
+        ),
+        "/vehicle/status/steering_status": ns["autoware_vehicle_msgs/msg/SteeringReport"](
+            stamp=tm, steering_tire_angle=float(rec.steer[k])
+        ),
+    }
+    if rec.has_torques:
+        msgs["/vdsbi/torque_front"] = ns["std_msgs/msg/Float64"](data=float(rec.torque_front[k]))
+        msgs["/vdsbi/torque_rear"] = ns["std_msgs/msg/Float64"](data=float(rec.torque_rear[k]))
+    if "/vehicle/status/velocity_status" in conns:
+        msgs["/vehicle/status/velocity_status"] = ns["autoware_vehicle_msgs/msg/VelocityReport"](
+            header=ns["std_msgs/msg/Header"](stamp=tm, frame_id="base_link"),
+            longitudinal_velocity=float(ch["vx"][k]),
+            lateral_velocity=0.0,
+            heading_rate=0.0,
+        )
+    if "/vdsbi/wheel_speeds" in conns:
+        msgs["/vdsbi/wheel_speeds"] = ns["std_msgs/msg/Float64MultiArray"](
+            layout=ns["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0),
+            data=np.array([ch["omega_front"][k], ch["omega_rear"][k]], dtype=np.float64),
+        )
+    return msgs
