@@ -244,7 +244,7 @@ class VehicleModel(eqx.Module):
         # Eq. 1 in body axes; gravity components of grade/bank add to the motion only.
         dvx = a_x + gx + vy * r
         dvy = a_y + gy - vx * r
-        dr = self._yaw_acceleration(theta, effect_params, ctx, (fx_f, fy_f, fy_r), delta)
+        dr = self._yaw_acceleration(theta, effect_params, ctx, (fx_f, fy_f, fy_r), (cos_d, sin_d))
         d_base = jnp.stack(
             [
                 dvx,
@@ -311,7 +311,7 @@ class VehicleModel(eqx.Module):
 
         dvy = a_y + gy - vx * r
         ctx = ctx._replace(ax=a_x, ay=a_y)
-        dr = self._yaw_acceleration(theta, effect_params, ctx, (fx_f, fy_f, fy_r), delta)
+        dr = self._yaw_acceleration(theta, effect_params, ctx, (fx_f, fy_f, fy_r), (cos_d, sin_d))
         d_base = jnp.stack(
             [
                 dvx,
@@ -388,13 +388,14 @@ class VehicleModel(eqx.Module):
         alpha_r = -arctan((vy - l_r * r) / vx_pos)
         return alpha_f, alpha_r, jnp.maximum(vx, 0.0) / self.vehicle.relaxation_length
 
-    def _yaw_acceleration(self, theta, effect_params, ctx: Context, forces, delta):
+    def _yaw_acceleration(self, theta, effect_params, ctx: Context, forces, cos_sin):
         """Eq. 1's yaw equation: axle lateral forces about the CoG plus the effects' moments."""
         fx_f, fy_f, fy_r = forces
+        cos_d, sin_d = cos_sin
         l_f = theta[0]
         l_r = self.vehicle.wheelbase - l_f
         m_z = self.yaw_moment(effect_params, ctx)
-        lateral_f = fx_f * jnp.sin(delta) + fy_f * jnp.cos(delta)
+        lateral_f = fx_f * sin_d + fy_f * cos_d
         return (l_f * lateral_f - l_r * fy_r + m_z) / self.yaw_inertia(theta, effect_params)
 
     def _with_effects(self, d_base, effect_params, zs, u_cmd, ctx: Context):
