@@ -7,8 +7,8 @@ from ._bag import (
     autoware_typestore as autoware_typestore,
     load_topic_map as load_topic_map,
     read_bag as read_bag,
-    write_bag as write_bag,
 )
+from ._bag_writer import write_bag as write_bag
 from ._csv import read_csv as read_csv
 from ._drive import (
     check_against_vehicle as check_against_vehicle,
