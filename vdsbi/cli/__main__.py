@@ -1,3 +1,5 @@
-from ._main import entry
+import sys
 
-entry()
+from ._main import main
+
+sys.exit(main())
