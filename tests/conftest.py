@@ -1,9 +1,14 @@
 import itertools
+import os
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+
+# `vdsbi` processes the tests start keep no compiled programs in the user's cache folder
+# (test_cli_identify checks the cache with a folder of its own).
+os.environ.setdefault("VDSBI_COMPILATION_CACHE", "off")
 
 
 @pytest.fixture

@@ -96,8 +96,8 @@ def test_identify_writes_all_files(full_run):
     )
 
 
-def _sample_in_new_process(run_dir: Path, seed: int) -> str:
-    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+def _sample_in_new_process(run_dir: Path, seed: int, **env_vars: str) -> str:
+    env = {**os.environ, "JAX_PLATFORMS": "cpu", **env_vars}
     cmd = [sys.executable, "-m", "vdsbi.cli", "sample", str(run_dir), "--n", "50", "--seed", str(seed)]
     out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=300)
     assert out.returncode == 0, out.stderr
@@ -122,6 +122,29 @@ def test_sample_reloads_in_new_process(full_run, tmp_path):
     np.testing.assert_allclose(pd.read_csv(tmp_path / "s.csv").to_numpy(), here, rtol=1e-6)
     assert main(["sample", str(full_run), "--n", "50", "--seed", "4", "--out", str(tmp_path / "t.csv")]) == 0
     assert not np.allclose(pd.read_csv(tmp_path / "t.csv").to_numpy(), here)
+
+
+def test_the_command_keeps_its_compiled_programs_for_the_next_run(full_run, tmp_path):
+    """A second `vdsbi` process finds every program the first compiled (it adds no entry to the
+    cache folder, where each compilation that missed would add one) and prints the same draws."""
+    cache = tmp_path / "cache"
+    env = {"VDSBI_COMPILATION_CACHE": str(cache), "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0"}
+    first = _sample_in_new_process(full_run, 5, **env)
+    entries = sorted(p.name for p in cache.iterdir())
+    assert entries  # the sampler's programs were written
+    assert _sample_in_new_process(full_run, 5, **env) == first
+    assert sorted(p.name for p in cache.iterdir()) == entries
+
+
+def test_compilation_cache_folder_from_the_environment(tmp_path):
+    from vdsbi.cli._main import compilation_cache_dir
+
+    assert compilation_cache_dir({"VDSBI_COMPILATION_CACHE": "off"}) is None
+    assert compilation_cache_dir({"VDSBI_COMPILATION_CACHE": str(tmp_path)}) == tmp_path
+    assert compilation_cache_dir({"XDG_CACHE_HOME": str(tmp_path)}) == tmp_path / "vdsbi" / "jax"
+    # The user's own JAX setting wins: JAX reads it itself.
+    jax_own = {"JAX_COMPILATION_CACHE_DIR": str(tmp_path), "VDSBI_COMPILATION_CACHE": "/elsewhere"}
+    assert compilation_cache_dir(jax_own) is None
 
 
 def _numbers(run_dir: Path) -> tuple[np.ndarray, dict]:

@@ -20,4 +20,4 @@ COMMANDS: tuple[str, ...] = (
 )
 
 from ..api import output_dir as output_dir  # noqa: E402
-from ._main import build_parser as build_parser, main as main  # noqa: E402
+from ._main import build_parser as build_parser, entry as entry, main as main  # noqa: E402

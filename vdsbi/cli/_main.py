@@ -4,14 +4,21 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from .. import __version__
 from ..io import InputError
 
 #: Exit status for bad user input (same as argparse's usage errors).
 EXIT_INPUT = 2
+
+#: Environment variable naming the folder of compiled programs kept between runs ("off": none).
+CACHE_ENV = "VDSBI_COMPILATION_CACHE"
+#: The folder's size limit; JAX evicts the least recently used programs beyond it.
+CACHE_MAX_BYTES = 2 * 1024**3
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -49,9 +56,38 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
 
 
-def entry() -> None:  # pragma: no cover - console-script shim
+def compilation_cache_dir(environ=os.environ) -> Path | None:
+    """Where the `vdsbi` command keeps compiled programs: ``$VDSBI_COMPILATION_CACHE`` ("off":
+    nowhere), else ``$XDG_CACHE_HOME/vdsbi/jax`` (``~/.cache/vdsbi/jax``). None (nothing to set)
+    where the user set JAX's own ``JAX_COMPILATION_CACHE_DIR``: JAX reads that itself."""
+    if environ.get("JAX_COMPILATION_CACHE_DIR"):
+        return None
+    value = environ.get(CACHE_ENV)
+    if value is not None:
+        return None if value.strip().lower() in ("", "off", "0", "none") else Path(value).expanduser()
+    base = environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "vdsbi" / "jax"
+
+
+def _use_compilation_cache(folder: Path | None) -> None:
+    """Keep compiled programs in ``folder`` across runs: most of a small run is XLA compiling the
+    simulator and the flow for the drive's shapes (the demo test's small loop: 93 s with none
+    kept, 49 s with its programs kept), which a resumed or repeated `identify` reuses. These are
+    process-wide JAX settings, so only the command's own process sets them (`entry`), never the
+    library or `main`."""
+    if folder is None:
+        return
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", str(folder))
+    jax.config.update("jax_compilation_cache_max_size", CACHE_MAX_BYTES)
+
+
+def entry() -> None:
+    """The ``vdsbi`` command: `main` in a process that keeps its compiled programs."""
+    _use_compilation_cache(compilation_cache_dir())
     sys.exit(main())
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    entry()
