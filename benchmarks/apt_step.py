@@ -28,8 +28,13 @@ def step_ms(dim: int, x_dim: int) -> dict:
     import jax
     import jax.numpy as jnp
 
-    from vdsbi.inference import BoxPrior, ConditionalFlow, IdentityEmbedding
-    from vdsbi.inference._loss import AtomicLoss, MaximumLikelihoodLoss
+    from vdsbi.inference import (
+        AtomicLoss,
+        BoxPrior,
+        ConditionalFlow,
+        IdentityEmbedding,
+        MaximumLikelihoodLoss,
+    )
 
     prior = BoxPrior(-3.0 * jnp.ones(dim), 3.0 * jnp.ones(dim))
     flow = ConditionalFlow(jax.random.key(0), prior, IdentityEmbedding(x_dim), (x_dim,), theta_map="affine")
@@ -91,7 +96,10 @@ def main():
         "commit": _commit(),
     }
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
-    stored = json.load(open(args.out)) if os.path.exists(args.out) else {}
+    stored = {}
+    if os.path.exists(args.out):
+        with open(args.out) as f:
+            stored = json.load(f)
     stored[f"concurrent_{len(runs)}"] = record
     with open(args.out + ".tmp", "w") as f:
         json.dump(stored, f, indent=1)
