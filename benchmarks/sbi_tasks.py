@@ -47,6 +47,7 @@ import _sbibm  # noqa: E402
 
 from vdsbi.diagnostics import c2st  # noqa: E402
 from vdsbi.inference import IdentityEmbedding, NPEConfig, apt  # noqa: E402
+from vdsbi.simulator import release_compiled_programs  # noqa: E402
 from vdsbi.tasks import get_task  # noqa: E402
 
 PUBLISHED = {  # sbibm (Lueckmann et al. 2021), mean C2ST over 10 observations, sbi + NSF
@@ -173,6 +174,7 @@ def run_cell(
     for i in obs_ids:
         x_o, rec = obs.x(i), {"obs_id": i}
         if method in SEQUENTIAL:
+            release_compiled_programs()  # a long grid stays under the memory-map limit
             t0 = time.perf_counter()
             post, state = apt(
                 jax.random.fold_in(key, i),

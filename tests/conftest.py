@@ -64,3 +64,14 @@ __all__ = ["tree_allclose", "jnp"]
 # No persistent XLA compilation cache: on a run at 814d410 a worker segfaulted inside JAX's
 # cache write (`executable.serialize()`, test_discovery_terms), a native crash no test can catch;
 # a clean CI checkout starts with an empty cache anyway, so it bought little there.
+
+
+@pytest.fixture(autouse=True)
+def _under_the_memory_map_limit():
+    """One pytest worker compiles hundreds of programs; without this it reached Linux's
+    `vm.max_map_count` after ~275 tests and died in XLA's compiler (see
+    `vdsbi.simulator.release_compiled_programs`)."""
+    yield
+    from vdsbi.simulator import release_compiled_programs
+
+    release_compiled_programs()

@@ -29,6 +29,7 @@ from ..problem import (
     validate,
     windowed_model,
 )
+from ..simulator import release_compiled_programs
 from ._commands import diagnose_command
 from ._outputs import (
     CHECKPOINT,
@@ -162,6 +163,7 @@ def identify(
     import jax
 
     say = log or (lambda s: None)
+    release_compiled_programs()  # a process that identifies drive after drive stays under the limit
     rec, veh = _load(recording, vehicle, rate)
     settings = _settings(rounds, sims, embedding, epochs, num_samples)
     prob = _problem(rec, veh, longitudinal, segment, max_duration, bandwidth)

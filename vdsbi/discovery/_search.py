@@ -23,6 +23,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
+from ..simulator import release_compiled_programs
 from ._candidates import label
 from ._fit import FitResult
 from ._rank import STRONG, bic_score
@@ -58,6 +59,7 @@ def _step(current, names, fits, fit_fn) -> Step:
             continue
         cand = _ordered(current + (e,), names)
         if cand not in fits:
+            release_compiled_programs()  # each candidate compiles programs of its own
             fits[cand] = fit_fn(cand, fits[current].z)
         gains[e] = float(bic_score(fits[cand], fits[current]))
     if not gains:

@@ -24,6 +24,10 @@ from ._profiles import (
     random_profile as random_profile,
     seed_profile as seed_profile,
 )
+from ._programs import (
+    memory_map_usage as memory_map_usage,
+    release_compiled_programs as release_compiled_programs,
+)
 from ._sensors import (
     SEED_RELATIVE_NOISE as SEED_RELATIVE_NOISE,
     SensorNoise as SensorNoise,
