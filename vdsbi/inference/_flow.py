@@ -69,13 +69,17 @@ class _ResidualNet(eqx.Module):
         # Near-zero output: every spline starts close to the identity.
         self.last = eqx.tree_at(lambda m: (m.weight, m.bias), last, (last.weight * 1e-2, last.bias * 0.0))
 
-    def __call__(self, h):
+    def features(self, h):
+        """The last hidden layer (before ``last``)."""
         c = h[h.shape[0] - self.context_dim :]
         h = self.first(h)
         for i, (a, b) in enumerate(self.blocks):
             r = b(jax.nn.relu(a(jax.nn.relu(h))))
             h = h + (r * jax.nn.sigmoid(self.gates[i](c)) if self.gates else r)
-        return self.last(h)
+        return h
+
+    def __call__(self, h):
+        return self.last(self.features(h))
 
 
 class _Layer(eqx.Module):
@@ -105,9 +109,38 @@ class _Layer(eqx.Module):
         self.diag_raw = jnp.full((dim,), math.log(math.expm1(1.0 - 1e-3)), dtype=self.lower.dtype)
         self.bias = jnp.zeros((dim,))
 
-    def _spline_params(self, z, context):
-        h = jnp.concatenate([jnp.where(self.mask, z, 0.0), context])
-        return self.conditioner(h).reshape(self.dim, num_spline_params(self.num_bins))
+    def _selection(self):
+        """``(P, valid)``: ``P[j]`` is the one-hot row of the j-th transformed coordinate.
+
+        Only the coordinates a coupling layer transforms (at most ``ceil(d/2)``; ``valid`` is
+        False on the padding of a layer that transforms fewer) get conditioner outputs and a
+        spline: the conditioning half would be computed and thrown away, a third of the APT
+        step's time at d = 5. The selection is a product with a one-hot matrix, computed once
+        per layer (not per example), so a batch needs no gather or scatter.
+        """
+        m = _num_transformed(self.dim)
+        order = jnp.argsort(self.mask, stable=True)[:m]  # transformed (False) coordinates first
+        onehot = jax.nn.one_hot(order, self.dim, dtype=self.lower.dtype)
+        return onehot, ~self.mask[order]
+
+    def _spline_params(self, z, context, onehot):
+        """Spline parameters of the transformed coordinates, ``(m, 3K-1)``; the conditioner's
+        output rows of the conditioning coordinates are never used."""
+        h = self.conditioner.features(jnp.concatenate([jnp.where(self.mask, z, 0.0), context]))
+        last = self.conditioner.last
+        p = num_spline_params(self.num_bins)
+        weight = jnp.einsum("md,dph->mph", onehot, last.weight.reshape(self.dim, p, -1))
+        bias = onehot @ last.bias.reshape(self.dim, p)
+        return weight @ h + bias
+
+    def _couple(self, spline, z, context):
+        """Apply ``spline`` to the transformed coordinates of ``z``; ``(out, log|det|)``."""
+        onehot, valid = self._selection()
+        params = self._spline_params(z, context, onehot)
+        zt = onehot @ z
+        yt, ld = jax.vmap(spline, in_axes=(0, 0, None))(zt, params, self.bound)
+        out = z + (jnp.where(valid, yt - zt, 0.0)) @ onehot
+        return out, jnp.sum(jnp.where(valid, ld, 0.0))
 
     def _lu(self):
         eye = jnp.eye(self.dim, dtype=self.lower.dtype)
@@ -117,10 +150,7 @@ class _Layer(eqx.Module):
         return L, U, jnp.sum(jnp.log(diag))
 
     def forward(self, z, context):
-        params = self._spline_params(z, context)
-        y, ld = jax.vmap(rq_spline_forward, in_axes=(0, 0, None))(z, params, self.bound)
-        y = jnp.where(self.mask, z, y)
-        logdet = jnp.sum(jnp.where(self.mask, 0.0, ld))
+        y, logdet = self._couple(rq_spline_forward, z, context)
         if self.use_lu:
             L, U, ld_lu = self._lu()
             y = L @ (U @ y) + self.bias
@@ -135,10 +165,13 @@ class _Layer(eqx.Module):
             y = jsl.solve_triangular(U, v, lower=False)
             logdet = -ld_lu
         # The conditioning coordinates are unchanged by the coupling, so params are recoverable.
-        params = self._spline_params(y, context)
-        z, ld = jax.vmap(rq_spline_inverse, in_axes=(0, 0, None))(y, params, self.bound)
-        z = jnp.where(self.mask, y, z)
-        return z, logdet + jnp.sum(jnp.where(self.mask, 0.0, ld))
+        z, ld = self._couple(rq_spline_inverse, y, context)
+        return z, logdet + ld
+
+
+def _num_transformed(dim: int) -> int:
+    """Most coordinates one coupling layer transforms (see `_masks`)."""
+    return 1 if dim == 1 else (dim + 1) // 2
 
 
 def _masks(num_layers: int, dim: int):
