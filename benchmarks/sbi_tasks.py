@@ -307,12 +307,20 @@ def main():
         choices=["epochs", "new_data"],
         help="NPEConfig.patience_unit (default: its default)",
     )
+    ap.add_argument(
+        "--set",
+        nargs="+",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="other NPEConfig fields, e.g. --set num_atoms=5 (use another --out for variants)",
+    )
     ap.add_argument("--force", action="store_true", help="rerun and replace stored cells (else resume)")
     ap.add_argument("--c2st-jobs", type=int, default=1, help="parallel C2ST folds (same result as 1)")
     ap.add_argument("--table", action="store_true", help="only rewrite the .md table from the JSON")
     ap.add_argument("--out", default=os.path.join(HERE, "results", "sbi_tasks.json"))
     args = ap.parse_args()
     overrides = {} if args.patience_unit is None else {"patience_unit": args.patience_unit}
+    overrides.update(_parse_overrides(args.set))
     if args.quick:
         args.tasks, args.budgets, args.n_obs = ["two_moons"], [1_000], 2
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
@@ -337,6 +345,19 @@ def main():
             )
             results = _save(args.out, cell, args.observations, replace=args.force and j == 0)
         print(table(results), flush=True)
+
+
+def _parse_overrides(items):
+    """``["num_atoms=5", ...]`` -> ``{"num_atoms": 5}``, each value typed as its field's default."""
+    defaults = dataclasses.asdict(NPEConfig())
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or name not in defaults:
+            raise SystemExit(f"--set wants FIELD=VALUE with an NPEConfig field, got {item!r}")
+        kind = type(defaults[name])
+        out[name] = value if defaults[name] is None else (value == "True" if kind is bool else kind(value))
+    return out
 
 
 def _key(r):
