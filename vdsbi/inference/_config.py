@@ -48,7 +48,9 @@ class NPEConfig:
             differing by initialisation); the posterior is their equal-weight mixture
             (`FlowEnsemble`). 1 (default): a single `ConditionalFlow`.
         validation_fraction: fraction of each round's simulations held out for validation.
-        num_atoms: atoms per example in the APT loss (rounds > 1).
+        num_atoms: atoms per example in the APT loss (rounds > 1). Its cost is linear in it; 5
+            ran the sbibm tasks at 10⁴ 1.5-2.7x faster but worse on 14 of 16 observations
+            (``benchmarks/results/apt_atoms/``), so the default stays sbi's 10.
         combined_loss: add maximum likelihood on prior draws to the atomic loss.
         x_standardize: ``"channel"`` (statistics over all axes but the last), ``"global"``,
             ``"trajectory"`` (minus the mean trajectory, per-channel scale; see `Standardizer.fit`)
