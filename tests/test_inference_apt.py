@@ -130,6 +130,36 @@ def test_scanned_epoch_equals_sequential_steps(getkey):
         assert tree_allclose(flow_e, flow, rtol=1e-4, atol=1e-6)
 
 
+def test_weight_average_is_the_ema_of_sequential_steps(getkey):
+    # the averaged flow of the scanned loop is the EMA of the step-by-step weights; padding
+    # steps (live False) leave it untouched; a different decay reuses the trace
+    import equinox as eqx
+
+    from vdsbi.inference import trainable_filter
+
+    theta, x, flow0, opt = _tiny_problem(getkey, 128)
+    keys = jax.random.split(getkey(), 4)
+    batches = tuple(a.reshape(4, 32, *a.shape[1:]) for a in (theta, x, np.ones(128, bool)))
+    live = np.array([True, True, True, False])
+    loss = MaximumLikelihoodLoss()
+    before = TRACE_COUNTS["train_steps"]
+    for decay in (0.7, 0.9):
+        flow, state = flow0, init_opt_state(flow0, opt)
+        avg = eqx.filter(flow0, trainable_filter(flow0))
+        for i in range(3):
+            flow, state, _ = train_step(flow, state, tuple(b[i] for b in batches), keys[i], loss, opt)
+            p = eqx.filter(flow, trainable_filter(flow))
+            avg = jax.tree.map(lambda a, w: decay * a + (1 - decay) * w, avg, p)
+        out = train_steps(
+            flow0, init_opt_state(flow0, opt), batches, keys, loss, opt, live, (flow0, jnp.asarray(decay))
+        )
+        assert tree_allclose(out[0], flow, rtol=1e-4, atol=1e-6)
+        got = eqx.filter(out[3], trainable_filter(out[3]))
+        assert tree_allclose(got, avg, rtol=1e-4, atol=1e-6)
+        assert not tree_allclose(got, eqx.filter(flow, trainable_filter(flow)), rtol=1e-4, atol=1e-6)
+    assert TRACE_COUNTS["train_steps"] - before == 1
+
+
 def test_nonfinite_and_invalid_simulations_are_excluded_and_counted(getkey):
     prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
     seen = {}
@@ -202,13 +232,14 @@ def test_apt_rounds_compile_a_bounded_number_of_shapes(getkey):
     assert all(TRACE_COUNTS[k] == before[k] for k in names)
 
 
-def test_npe_on_given_simulations_learns_and_checks_shapes(getkey):
+@pytest.mark.parametrize("average_epochs", [0.0, 1.0])
+def test_npe_on_given_simulations_learns_and_checks_shapes(average_epochs, getkey):
     from vdsbi.inference import npe
 
     prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
     theta = np.asarray(prior.sample(getkey(), 512))
     x = np.asarray(_gauss_sim(getkey(), theta)[0])
-    cfg = dataclasses.replace(TINY, max_epochs=8)
+    cfg = dataclasses.replace(TINY, max_epochs=8, average_epochs=average_epochs)
     flow, info = npe(getkey(), prior, theta, x, embedding=IdentityEmbedding(2), config=cfg)
     assert info["epochs"] <= 8 and np.all(np.isfinite(info["val_losses"]))
     # trained: the validation loss ends below where it started (x = θ + small noise is informative)
@@ -288,6 +319,8 @@ def test_new_config_fields_are_checked():
         NPEConfig(theta_map="probit")
     with pytest.raises(ValueError, match="ensemble"):
         NPEConfig(ensemble=0)
+    with pytest.raises(ValueError, match="average_epochs"):
+        NPEConfig(average_epochs=-1.0)
 
 
 def test_ensemble_members_are_trained_independently_at_once(getkey):

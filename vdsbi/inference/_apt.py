@@ -255,6 +255,7 @@ def _train_round(
         round_index=r,
         mesh=problem.mesh,
         lr_schedule=schedule,
+        average_epochs=config.average_epochs,
     )
     info = {"loss": type(loss).__name__, "patience": patience, "lr_schedule": schedule}
     return flow, {**finfo, **info, "max_epochs": max_epochs}

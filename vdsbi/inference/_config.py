@@ -44,6 +44,9 @@ class NPEConfig:
             epochs. The same as ``"epochs"`` in round 1, for NPE, with ``retrain_from_scratch``
             and after a round that ran out of ``max_epochs``. APT two_moons at 10⁴, sbibm
             observation 1: 243 → 65 s, C2ST 0.548 → 0.552 (``benchmarks/results/apt_patience/``).
+        average_epochs: 0 (default) or the time constant, in epochs, of an exponential moving
+            average of the weights that validation, early stopping and the returned flow use
+            (`fit`).
         ensemble: number of flows trained at once (vmapped over members, each on its own loss,
             differing by initialisation); the posterior is their equal-weight mixture
             (`FlowEnsemble`). 1 (default): a single `ConditionalFlow`.
@@ -86,6 +89,7 @@ class NPEConfig:
     patience_unit: Literal["epochs", "new_data"] = "new_data"
     lr_schedule: Literal["constant", "cosine"] = "constant"
     later_max_epochs: int | None = None
+    average_epochs: float = 0.0
     ensemble: int = 1
     validation_fraction: float = 0.1
     num_atoms: int = 10
@@ -120,6 +124,8 @@ class NPEConfig:
             raise ValueError(f"theta_map must be 'logit' or 'affine', got {self.theta_map!r}")
         if self.later_max_epochs is not None and self.later_max_epochs < 1:
             raise ValueError(f"later_max_epochs must be >= 1 or None, got {self.later_max_epochs}")
+        if self.average_epochs < 0:
+            raise ValueError(f"average_epochs must be >= 0, got {self.average_epochs}")
         if self.ensemble < 1:
             raise ValueError(f"ensemble must be >= 1, got {self.ensemble}")
         if self.num_atoms < 2:

@@ -60,5 +60,6 @@ def npe(
         patience=config.patience,
         mesh=mesh,
         lr_schedule=config.lr_schedule,
+        average_epochs=config.average_epochs,
         on_epoch_end=on_epoch_end,
     )

@@ -73,35 +73,47 @@ def train_step(flow: ConditionalFlow, opt_state, batch, key: PRNGKeyArray, loss:
 
 
 @eqx.filter_jit
-def train_steps(flow: ConditionalFlow, opt_state, batches, keys, loss: AbstractLoss, optimizer, live=None):
+def train_steps(
+    flow: ConditionalFlow, opt_state, batches, keys, loss: AbstractLoss, optimizer, live=None, average=None
+):
     """Consecutive steps in one ``lax.scan``: ``batches`` leaves are ``(num_steps, batch, ...)``.
 
     Python dispatch of a small flow's step costs about as much as its arithmetic, so blocks of
     steps run as one compiled loop. ``live`` (``(num_steps,)`` bool, default all True) marks
     padding steps that leave the state untouched, so every block of an epoch has one length and
-    the loop is compiled once however the data grow. Returns ``(flow, opt_state, mean loss)``
-    (the mean over live steps).
+    the loop is compiled once however the data grow. ``average``: optionally ``(avg_flow, decay)``,
+    an exponential moving average of the weights updated after every live step as
+    ``avg <- decay·avg + (1 - decay)·weights`` (``decay`` a traced scalar: no recompilation).
+    Returns ``(flow, opt_state, mean loss)`` (the mean over live steps), and the updated average
+    flow last when ``average`` is given.
     """
     TRACE_COUNTS["train_steps"] += 1
     params, static = eqx.partition(flow, trainable_filter(flow))
     live = jnp.ones(keys.shape[0], bool) if live is None else live
     dtype = jax.tree.leaves(params)[0].dtype
+    if average is None:
+        avg, decay = None, None
+    else:
+        avg, decay = eqx.filter(average[0], trainable_filter(average[0])), average[1].astype(dtype)
 
     def body(carry, inp):
         batch, key, on = inp
 
         def step(c):
-            return _update(*c[:1], static, c[1], batch, key, loss, optimizer)
+            p, s, a = c
+            p, s, value = _update(p, static, s, batch, key, loss, optimizer)
+            a = None if a is None else jax.tree.map(lambda u, v: decay * u + (1.0 - decay) * v, a, p)
+            return (p, s, a), value
 
         def skip(c):
-            return c[0], c[1], jnp.zeros((), dtype)
+            return c, jnp.zeros((), dtype)
 
-        params, opt_state, value = jax.lax.cond(on, step, skip, carry)
-        return (params, opt_state), value
+        return jax.lax.cond(on, step, skip, carry)
 
-    (params, opt_state), values = jax.lax.scan(body, (params, opt_state), (batches, keys, live))
+    (params, opt_state, avg), values = jax.lax.scan(body, (params, opt_state, avg), (batches, keys, live))
     mean = jnp.sum(jnp.where(live, values, 0.0)) / jnp.maximum(jnp.sum(live), 1)
-    return eqx.combine(params, static), opt_state, mean
+    out = (eqx.combine(params, static), opt_state, mean)
+    return out if avg is None else (*out, eqx.combine(avg, static))
 
 
 @eqx.filter_jit
@@ -184,9 +196,11 @@ def _validation_blocks(data, va: np.ndarray, vsz: int, block: int, mesh) -> list
     ]
 
 
-def _train_epoch(flow, opt_state, keys, data, tr: np.ndarray, bsz: int, block: int, mesh, loss, optimizer):
+def _train_epoch(state, keys, data, tr: np.ndarray, bsz: int, block: int, mesh, loss, optimizer, decay):
     """One pass over a random permutation of the training rows ``tr`` (``keys = (k_perm, k_steps)``),
-    in compiled blocks of ``block`` steps; returns ``(flow, opt_state, mean training loss)``."""
+    in compiled blocks of ``block`` steps. ``state = (flow, opt_state, avg_flow or None)``; returns
+    the new state and the mean training loss."""
+    flow, opt_state, avg = state
     k_perm, k_steps = keys
     nb = tr.size // bsz
     perm = tr[np.asarray(jax.random.permutation(k_perm, tr.size))][: nb * bsz].reshape(nb, bsz)
@@ -195,9 +209,23 @@ def _train_epoch(flow, opt_state, keys, data, tr: np.ndarray, bsz: int, block: i
     for j, (idx, live) in enumerate(_blocks(perm, block)):
         batches = stack_batches(tuple(a[idx] for a in data), mesh)
         keys = step_keys[np.minimum(np.arange(j * block, (j + 1) * block), nb - 1)]
-        flow, opt_state, mean = train_steps(flow, opt_state, batches, keys, loss, optimizer, live)
+        if avg is None:
+            flow, opt_state, mean = train_steps(flow, opt_state, batches, keys, loss, optimizer, live)
+        else:
+            flow, opt_state, mean, avg = train_steps(
+                flow, opt_state, batches, keys, loss, optimizer, live, (avg, decay)
+            )
         total = total + mean * live.sum()
-    return flow, opt_state, float(total) / nb
+    return (flow, opt_state, avg), float(total) / nb
+
+
+def _average_decay(average_epochs: float, steps_per_epoch: int, mesh):
+    """Per-step EMA decay whose time constant is ``average_epochs`` epochs (None if off)."""
+    if average_epochs < 0:
+        raise ValueError(f"average_epochs must be >= 0, got {average_epochs}")
+    if average_epochs == 0:
+        return None
+    return replicate(jnp.asarray(1.0 - 1.0 / max(average_epochs * steps_per_epoch, 1.0)), mesh)
 
 
 def fit(
@@ -220,6 +248,7 @@ def fit(
     mesh=None,
     steps_per_call: int = 32,
     lr_schedule: str = "constant",
+    average_epochs: float = 0.0,
 ):
     """Train ``flow`` on ``theta``/``x`` (host arrays); return the best-validation flow and an info dict.
 
@@ -229,6 +258,9 @@ def fit(
     masked no-op steps), so per-step Python dispatch is amortised and the loop is compiled once
     per loss and batch size, not once per data size. ``lr_schedule`` (see
     `epoch_learning_rate`) sets the learning rate per epoch over ``max_epochs``.
+    ``average_epochs`` > 0: validation, early stopping and the returned flow use an exponential
+    moving average of the weights with a time constant of that many epochs, started from
+    ``flow`` (it damps the SGD noise a short, early-stopped round leaves in the weights).
     """
     mesh = data_mesh() if mesh is None else mesh
     tr, va = np.flatnonzero(~is_val), np.flatnonzero(is_val)
@@ -238,6 +270,8 @@ def fit(
     optimizer = make_optimizer(float(learning_rate), float(weight_decay), float(clip_norm), scheduled)
     flow = replicate(flow, mesh)
     opt_state = replicate(init_opt_state(flow, optimizer), mesh)
+    decay = _average_decay(average_epochs, tr.size // bsz, mesh)
+    state = (flow, opt_state, None if decay is None else flow)
     key, val_key = jax.random.split(key)
     data = (theta, x, prior_mask)
     val_batches = _validation_blocks(data, va, vsz, steps_per_call, mesh)
@@ -251,10 +285,11 @@ def fit(
         key, k_perm, k_steps = jax.random.split(key, 3)
         if scheduled:
             lr = epoch_learning_rate(learning_rate, lr_schedule, epoch, max_epochs)
-            opt_state = _set_learning_rate(opt_state, lr)
-        flow, opt_state, train_loss = _train_epoch(
-            flow, opt_state, (k_perm, k_steps), data, tr, bsz, steps_per_call, mesh, loss, optimizer
+            state = (state[0], _set_learning_rate(state[1], lr), state[2])
+        state, train_loss = _train_epoch(
+            state, (k_perm, k_steps), data, tr, bsz, steps_per_call, mesh, loss, optimizer, decay
         )
+        flow = state[0] if state[2] is None else state[2]
         warm.result()  # compiled (or raised) before the loop calls it: never compiled twice
         val_loss = sum(float(eval_steps(flow, vb, val_key, loss, lv)) * n for vb, lv, n in val_batches) / nvb
         train_hist.append(train_loss)
