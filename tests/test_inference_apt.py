@@ -149,7 +149,7 @@ def test_weight_average_is_the_ema_of_sequential_steps(getkey):
         for i in range(3):
             flow, state, _ = train_step(flow, state, tuple(b[i] for b in batches), keys[i], loss, opt)
             p = eqx.filter(flow, trainable_filter(flow))
-            avg = jax.tree.map(lambda a, w: decay * a + (1 - decay) * w, avg, p)
+            avg = jax.tree.map(lambda a, w, d=decay: d * a + (1 - d) * w, avg, p)
         out = train_steps(
             flow0, init_opt_state(flow0, opt), batches, keys, loss, opt, live, (flow0, jnp.asarray(decay))
         )
