@@ -75,7 +75,11 @@ def test_c2st_sanity(getkey):
 def test_two_moons_apt_reaches_c2st_below_078():
     task = get_task("two_moons")
     _, x_o = task.observation(1)
-    cfg = NPEConfig(batch_size=128, learning_rate=1e-3, max_epochs=40, patience=10)
+    # Both rounds run into max_epochs at this learning rate, so the unaveraged weights end
+    # wherever the SGD noise leaves them: on the s16 machine (another CPU) training key 0
+    # scored 0.868 without averaging (keys 1-2: 0.686, 0.726) and 0.573 with the one-epoch
+    # weight average (keys 1-2: 0.685, 0.616), so the test trains with it.
+    cfg = NPEConfig(batch_size=128, learning_rate=1e-3, max_epochs=40, patience=10, average_epochs=1.0)
     post, state = apt(
         jax.random.key(0),
         task.simulate,
