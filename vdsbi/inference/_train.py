@@ -219,13 +219,23 @@ def _train_epoch(state, keys, data, tr: np.ndarray, bsz: int, block: int, mesh, 
     return (flow, opt_state, avg), float(total) / nb
 
 
-def _average_decay(average_epochs: float, steps_per_epoch: int, mesh):
-    """Per-step EMA decay whose time constant is ``average_epochs`` epochs (None if off)."""
+def _train_state(flow, optimizer, mesh, average_epochs: float, steps_per_epoch: int):
+    """``(flow, opt_state, avg_flow or None)`` replicated over ``mesh``, and the per-step EMA
+    decay whose time constant is ``average_epochs`` epochs (None when averaging is off)."""
     if average_epochs < 0:
         raise ValueError(f"average_epochs must be >= 0, got {average_epochs}")
+    flow = replicate(flow, mesh)
+    opt_state = replicate(init_opt_state(flow, optimizer), mesh)
     if average_epochs == 0:
-        return None
-    return replicate(jnp.asarray(1.0 - 1.0 / max(average_epochs * steps_per_epoch, 1.0)), mesh)
+        return (flow, opt_state, None), None
+    decay = 1.0 - 1.0 / max(average_epochs * steps_per_epoch, 1.0)
+    return (flow, opt_state, flow), replicate(jnp.asarray(decay), mesh)
+
+
+def _validation_loss(flow, val_batches: list, key: PRNGKeyArray, loss: AbstractLoss) -> float:
+    """Mean loss over the blocks of `_validation_blocks` (weighted by their live batches)."""
+    total = sum(float(eval_steps(flow, vb, key, loss, lv)) * n for vb, lv, n in val_batches)
+    return total / sum(int(n) for _, _, n in val_batches)
 
 
 def fit(
@@ -268,14 +278,11 @@ def fit(
     scheduled = lr_schedule != "constant"
     epoch_learning_rate(learning_rate, lr_schedule, 0, max_epochs)  # checks the name
     optimizer = make_optimizer(float(learning_rate), float(weight_decay), float(clip_norm), scheduled)
-    flow = replicate(flow, mesh)
-    opt_state = replicate(init_opt_state(flow, optimizer), mesh)
-    decay = _average_decay(average_epochs, tr.size // bsz, mesh)
-    state = (flow, opt_state, None if decay is None else flow)
+    state, decay = _train_state(flow, optimizer, mesh, average_epochs, tr.size // bsz)
+    flow = state[0]
     key, val_key = jax.random.split(key)
     data = (theta, x, prior_mask)
     val_batches = _validation_blocks(data, va, vsz, steps_per_call, mesh)
-    nvb = va.size // vsz
     # The validation loop compiles on a second thread while the first training block
     # compiles (XLA compiles without holding the GIL); its value, the initial loss, is unused.
     warm = _in_background(eval_steps, flow, val_batches[0][0], val_key, loss, val_batches[0][1])
@@ -291,7 +298,7 @@ def fit(
         )
         flow = state[0] if state[2] is None else state[2]
         warm.result()  # compiled (or raised) before the loop calls it: never compiled twice
-        val_loss = sum(float(eval_steps(flow, vb, val_key, loss, lv)) * n for vb, lv, n in val_batches) / nvb
+        val_loss = _validation_loss(flow, val_batches, val_key, loss)
         train_hist.append(train_loss)
         val_hist.append(val_loss)
         if val_loss < best:
