@@ -17,30 +17,11 @@ from ._config import NPEConfig
 from ._embeddings import AbstractEmbedding
 from ._flow import ConditionalFlow
 from ._loss import AtomicLoss
-from ._posterior import Posterior, _log_prob, _sample
+from ._posterior import Posterior, _sample
 from ._prior import BoxPrior
 from ._sharding import data_mesh
 from ._train import fit
-
-
-def _truncated_prior(key, flow, prior, x_o, n, config) -> tuple[Array, dict]:
-    """Prior restricted to the ``1 - ε`` highest-density region of ``flow`` at ``x_o`` (TSNPE)."""
-    k_q, key = jax.random.split(key)
-    ref = _sample(flow, k_q, x_o, config.truncation_samples)
-    threshold = jnp.quantile(_log_prob(flow, ref, x_o), config.truncation_epsilon)
-    out, drawn = [], 0
-    for _ in range(200):
-        key, k = jax.random.split(key)
-        cand = prior.sample(k, max(n, 10_000))
-        drawn += cand.shape[0]
-        out.append(np.asarray(cand[_log_prob(flow, cand, x_o) >= threshold]))
-        if sum(o.shape[0] for o in out) >= n:
-            break
-    acc = np.concatenate(out)[:n]
-    info = {"acceptance": acc.shape[0] / drawn, "num_from_posterior": int(n - acc.shape[0])}
-    if acc.shape[0] < n:  # region too small to reach by rejection: fill with posterior draws
-        acc = np.concatenate([acc, np.asarray(_sample(flow, key, x_o, n - acc.shape[0]))])
-    return jnp.asarray(acc), info
+from ._truncation import truncated_prior
 
 
 @dataclasses.dataclass(frozen=True)
@@ -173,7 +154,7 @@ def _propose(
     if r == 0 or flow is None:
         return problem.prior.sample(key, n), {"proposal": "prior"}
     if problem.truncate:
-        theta, tinfo = _truncated_prior(key, flow, problem.prior, problem.x_o, n, problem.config)
+        theta, tinfo = truncated_prior(key, flow, problem.prior, problem.x_o, n, problem.config)
         return theta, {"proposal": "truncated_prior", **tinfo}
     return _sample(flow, key, problem.x_o, n), {"proposal": "posterior"}
 
