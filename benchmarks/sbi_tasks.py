@@ -128,9 +128,11 @@ class _Observations:
 
 
 def _rounds(state):
-    """Per round: epochs, best epoch, patience (epochs) and wall seconds."""
+    """Per round: epochs, best epoch, patience (epochs), wall seconds and, for TSNPE, how the
+    truncated prior was drawn (proposal, acceptance, draws filled in from the posterior)."""
     keys = ("epochs", "best_epoch", "patience", "train_s")
-    return [{k: h.get(k) for k in keys} for h in state.history]
+    extra = ("region_proposal", "acceptance", "num_from_posterior")
+    return [{k: h.get(k) for k in keys} | {k: h[k] for k in extra if k in h} for h in state.history]
 
 
 def _provenance():
