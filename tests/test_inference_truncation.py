@@ -15,10 +15,10 @@ from vdsbi.inference._posterior import _log_prob
 CONFIG = NPEConfig(num_layers=2, num_bins=4, hidden=8, theta_map="affine", truncation_samples=4000)
 
 
-def _region(key, d, width):
-    """An untrained flow whose density is ~ N(0.5, width²) per coordinate in the box [-5, 5]^d."""
+def _region(key, d, width, centre=0.5):
+    """An untrained flow whose density is ~ N(centre, width²) per coordinate in the box [-5, 5]^d."""
     prior = BoxPrior(-5.0 * np.ones(d), 5.0 * np.ones(d))
-    theta = 0.5 + width * np.asarray(jax.random.normal(key, (2000, d)), np.float32)
+    theta = centre + width * np.asarray(jax.random.normal(key, (2000, d)), np.float32)
     flow = build_flow(jax.random.fold_in(key, 1), prior, IdentityEmbedding(d), theta, theta, CONFIG)
     return flow, prior, theta[0]
 
@@ -38,15 +38,17 @@ def test_ellipsoid_draws_are_uniform_inside_it(getkey):
 @pytest.mark.parametrize("scale", [1.25, 0.4])
 def test_ellipsoid_and_prior_rejection_draw_the_same_truncated_prior(getkey, monkeypatch, scale):
     """Both proposals are exact, so their draws agree in law; an ellipsoid started too small
-    (scale 0.4 cuts the region) must grow until it holds the region."""
+    (scale 0.4 cuts the region) must grow until it holds the region. The region touches the
+    box's face at 5, so the ellipsoid reaches outside the box."""
     monkeypatch.setattr(_truncation, "_SCALE", scale)
-    flow, prior, x_o = _region(getkey(), d=3, width=0.3)
+    flow, prior, x_o = _region(getkey(), d=3, width=0.3, centre=4.5)
     n, key = 2000, getkey()  # one key: the same reference draws, hence the same region
     by_prior, info_p = _truncation.truncated_prior(key, flow, prior, x_o, n, CONFIG, proposal="prior")
     by_ell, info_e = _truncation.truncated_prior(key, flow, prior, x_o, n, CONFIG, proposal="ellipsoid")
     assert info_p["num_from_posterior"] == info_e["num_from_posterior"] == 0
     assert info_e["region_covered"] and (info_e["ellipsoid_growths"] > 0) == (scale < 1)
     assert info_e["acceptance"] > 20 * info_p["acceptance"]
+    assert np.asarray(by_prior).max() > 4.95  # the box cuts the region
     for a, b in zip(np.asarray(by_prior).T, np.asarray(by_ell).T, strict=True):
         assert stats.ks_2samp(a, b).pvalue > 1e-3
     lp_p, lp_e = (np.asarray(_log_prob(flow, t, x_o)) for t in (by_prior, by_ell))

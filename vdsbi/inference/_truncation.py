@@ -13,6 +13,7 @@ ellipsoid grows while kept draws reach its outer shell.
 import dataclasses
 import math
 import warnings
+from functools import partial
 from typing import Any
 
 import jax
@@ -73,6 +74,20 @@ def _in_box(prior: BoxPrior, theta: np.ndarray) -> np.ndarray:
     return np.all((theta >= np.asarray(prior.low)) & (theta <= np.asarray(prior.high)), axis=1)
 
 
+def _in_box_draws(key, m: int, ell: _Ellipsoid, prior: BoxPrior, share: float) -> np.ndarray:
+    """``m`` draws uniform on the ellipsoid's part inside the box (``share`` of it, estimated);
+    the draws outside cost no flow evaluation."""
+    out, got = [], 0
+    for _ in range(100):
+        key, k = jax.random.split(key)
+        cand = ell.sample(k, int(min(4 * m / share, 10**7)))
+        out.append(cand[_in_box(prior, cand)])
+        got += out[-1].shape[0]
+        if got >= m:
+            break
+    return np.concatenate(out)[:m]
+
+
 def _reject(key, propose, keep, n: int) -> tuple[np.ndarray, int]:
     """Up to ``n`` kept draws of ``propose(key, m)`` (bounded batches) and the number drawn."""
     out, kept, drawn = [], 0, 0
@@ -99,7 +114,8 @@ def truncated_prior(
 ) -> tuple[Array, dict[str, Any]]:
     """``n`` draws of the prior restricted to the ``1 - ε`` HPD region of ``flow`` at ``x_o``.
 
-    ``proposal``: ``"auto"`` (the ellipsoid when it is smaller than the box), ``"prior"`` or
+    ``proposal``: ``"auto"`` (the ellipsoid when its part inside the box is smaller than the
+    box; a posterior with far-flung draws can make it larger), ``"prior"`` or
     ``"ellipsoid"`` (both exact; forcing one is for tests). Only if both fail to find ``n``
     draws is the round filled up with posterior draws (``info["num_from_posterior"]``, warned).
     """
@@ -108,19 +124,21 @@ def truncated_prior(
     lp = np.asarray(_log_prob(flow, jnp.asarray(ref), x_o))
     threshold = float(np.quantile(lp, config.truncation_epsilon))
 
-    def keep(theta):
-        inside = _in_box(prior, theta)
-        lp = np.asarray(_log_prob(flow, jnp.asarray(theta, jnp.float32), x_o))
-        return inside & (lp >= threshold)
+    def keep(theta):  # the flow's density is -inf outside the box
+        return np.asarray(_log_prob(flow, jnp.asarray(theta, jnp.float32), x_o)) >= threshold
 
     ell = _Ellipsoid.around(ref[lp >= threshold], _SCALE)
     box_log_volume = float(jnp.sum(jnp.log(prior.high - prior.low)))
     for growth in range(_GROWTHS + 1):
-        if proposal == "prior" or (proposal == "auto" and ell.log_volume() >= box_log_volume):
+        k_pilot, k_draw = jax.random.split(k_draw)
+        share = max(float(np.mean(_in_box(prior, ell.sample(k_pilot, 20_000)))), 1e-3)
+        if proposal == "prior" or (
+            proposal == "auto" and ell.log_volume() + math.log(share) >= box_log_volume
+        ):
             acc, drawn = _reject(k_draw, lambda k, m: np.asarray(prior.sample(k, m)), keep, n)
             info = {"region_proposal": "prior"}
             break
-        acc, drawn = _reject(k_draw, ell.sample, keep, n)
+        acc, drawn = _reject(k_draw, partial(_in_box_draws, ell=ell, prior=prior, share=share), keep, n)
         covered = acc.shape[0] == 0 or ell.distance(acc).max() <= _SHELL * ell.radius
         info = {"region_proposal": "ellipsoid", "ellipsoid_growths": growth, "region_covered": bool(covered)}
         if covered:
