@@ -129,9 +129,9 @@ class _Observations:
 
 def _rounds(state):
     """Per round: epochs, best epoch, patience (epochs), wall seconds and, for TSNPE, how the
-    truncated prior was drawn (proposal, acceptance, draws filled in from the posterior)."""
+    truncated prior was drawn (proposal, acceptance, draws filled in from the wider proposal)."""
     keys = ("epochs", "best_epoch", "patience", "train_s")
-    extra = ("region_proposal", "acceptance", "num_from_posterior")
+    extra = ("region_proposal", "acceptance", "num_filled")
     return [{k: h.get(k) for k in keys} | {k: h[k] for k in extra if k in h} for h in state.history]
 
 

@@ -45,7 +45,7 @@ def test_ellipsoid_and_prior_rejection_draw_the_same_truncated_prior(getkey, mon
     n, key = 2000, getkey()  # one key: the same reference draws, hence the same region
     by_prior, info_p = _truncation.truncated_prior(key, flow, prior, x_o, n, CONFIG, proposal="prior")
     by_ell, info_e = _truncation.truncated_prior(key, flow, prior, x_o, n, CONFIG, proposal="ellipsoid")
-    assert info_p["num_from_posterior"] == info_e["num_from_posterior"] == 0
+    assert info_p["num_filled"] == info_e["num_filled"] == 0
     assert info_e["region_covered"] and (info_e["ellipsoid_growths"] > 0) == (scale < 1)
     assert info_e["acceptance"] > 20 * info_p["acceptance"]
     assert np.asarray(by_prior).max() > 4.95  # the box cuts the region
@@ -60,17 +60,21 @@ def test_auto_reaches_a_ten_dimensional_region_without_posterior_draws(getkey):
     flow, prior, x_o = _region(getkey(), d=10, width=0.1)
     theta, info = _truncation.truncated_prior(getkey(), flow, prior, x_o, 1000, CONFIG)
     assert info["region_proposal"] == "ellipsoid" and info["region_covered"]
-    assert info["num_from_posterior"] == 0 and theta.shape == (1000, 10)
+    assert info["num_filled"] == 0 and theta.shape == (1000, 10)
     assert np.all(np.isfinite(np.asarray(_log_prob(flow, theta, x_o))))
 
 
-def test_unreachable_region_is_filled_with_posterior_draws_and_warned(getkey, monkeypatch):
+def test_unreachable_region_is_filled_from_the_wider_proposal_and_warned(getkey, monkeypatch):
+    """Filled draws come from the proposal (here the box: a truncated prior too, only wider),
+    never from the posterior, whose draws would bias maximum likelihood to a narrower fit."""
     monkeypatch.setattr(_truncation, "_BATCHES", 1)
     flow, prior, x_o = _region(getkey(), d=10, width=0.1)
-    with pytest.warns(UserWarning, match="posterior draws"):
+    with pytest.warns(UserWarning, match="wider prior region"):
         theta, info = _truncation.truncated_prior(getkey(), flow, prior, x_o, 1000, CONFIG, proposal="prior")
-    assert info["num_from_posterior"] == 1000 - round(info["acceptance"] * 10_000)
-    assert theta.shape == (1000, 10)
+    assert info["num_filled"] == 1000 - round(info["acceptance"] * 10_000) > 900
+    theta = np.asarray(theta)
+    assert theta.shape == (1000, 10) and np.all(np.abs(theta) <= 5.0)
+    assert np.all(np.abs(theta.std(0) - 10 / np.sqrt(12)) < 0.4)  # the box's spread, not the region's 0.1
 
 
 def test_tsnpe_rounds_propose_from_the_truncated_prior(getkey):
@@ -96,5 +100,5 @@ def test_tsnpe_rounds_propose_from_the_truncated_prior(getkey):
         truncate=True,
     )
     later = state.history[1]
-    assert later["proposal"] == "truncated_prior" and later["num_from_posterior"] == 0
+    assert later["proposal"] == "truncated_prior" and later["num_filled"] == 0
     assert np.all(state.theta[state.round_ids == 1].std(0) < 0.8 * state.theta[state.round_ids == 0].std(0))

@@ -88,6 +88,10 @@ def _in_box_draws(key, m: int, ell: _Ellipsoid, prior: BoxPrior, share: float) -
     return np.concatenate(out)[:m]
 
 
+def _box_draws(key, m: int, prior: BoxPrior) -> np.ndarray:
+    return np.asarray(prior.sample(key, m), np.float64)
+
+
 def _reject(key, propose, keep, n: int) -> tuple[np.ndarray, int]:
     """Up to ``n`` kept draws of ``propose(key, m)`` (bounded batches) and the number drawn."""
     out, kept, drawn = [], 0, 0
@@ -116,8 +120,10 @@ def truncated_prior(
 
     ``proposal``: ``"auto"`` (the ellipsoid when its part inside the box is smaller than the
     box; a posterior with far-flung draws can make it larger), ``"prior"`` or
-    ``"ellipsoid"`` (both exact; forcing one is for tests). Only if both fail to find ``n``
-    draws is the round filled up with posterior draws (``info["num_from_posterior"]``, warned).
+    ``"ellipsoid"`` (both exact; forcing one is for tests). A round that finds fewer than ``n``
+    is filled up (``info["num_filled"]``, warned) with draws of the proposal itself: uniform on
+    the box, or on the ellipsoid around all the posterior's draws, it is a truncated prior too,
+    only a wider one, so the fit stays unbiased; posterior draws (as before s17) would not.
     """
     k_ref, k_draw, k_fill = jax.random.split(key, 3)
     ref = np.asarray(_sample(flow, k_ref, x_o, config.truncation_samples))
@@ -135,22 +141,24 @@ def truncated_prior(
         if proposal == "prior" or (
             proposal == "auto" and ell.log_volume() + math.log(share) >= box_log_volume
         ):
-            acc, drawn = _reject(k_draw, lambda k, m: np.asarray(prior.sample(k, m)), keep, n)
+            propose = partial(_box_draws, prior=prior)
+            acc, drawn = _reject(k_draw, propose, keep, n)
             info = {"region_proposal": "prior"}
             break
-        acc, drawn = _reject(k_draw, partial(_in_box_draws, ell=ell, prior=prior, share=share), keep, n)
+        propose = partial(_in_box_draws, ell=ell, prior=prior, share=share)
+        acc, drawn = _reject(k_draw, propose, keep, n)
         covered = acc.shape[0] == 0 or ell.distance(acc).max() <= _SHELL * ell.radius
         info = {"region_proposal": "ellipsoid", "ellipsoid_growths": growth, "region_covered": bool(covered)}
         if covered:
             break
         ell = dataclasses.replace(ell, radius=1.5 * ell.radius)
-    info.update(acceptance=acc.shape[0] / drawn, num_from_posterior=max(0, n - acc.shape[0]))
-    acc = acc[:n].astype(np.float32)
-    if acc.shape[0] < n:  # region too small to reach by rejection: fill with posterior draws
+    info.update(acceptance=acc.shape[0] / drawn, num_filled=max(0, n - acc.shape[0]))
+    acc = acc[:n]
+    if acc.shape[0] < n:  # region too small to reach by rejection: the wider proposal fills in
         warnings.warn(
-            f"TSNPE: only {acc.shape[0]} of {n} truncated-prior draws found; the rest are posterior "
-            "draws, which bias maximum likelihood towards a too narrow posterior",
+            f"TSNPE: only {acc.shape[0]} of {n} draws found in the posterior's HPD region; the rest "
+            f"are drawn from the wider {info['region_proposal']} region (unbiased, less informative)",
             stacklevel=2,
         )
-        acc = np.concatenate([acc, np.asarray(_sample(flow, k_fill, x_o, n - acc.shape[0]), np.float32)])
-    return jnp.asarray(acc), info
+        acc = np.concatenate([acc, propose(k_fill, n - acc.shape[0])[: n - acc.shape[0]]])
+    return jnp.asarray(acc, jnp.float32), info
