@@ -29,6 +29,7 @@ from ._prior import BoxPrior
 _BATCHES = 200  # rejection batches per attempt, max(n, 10 000) candidates each
 _GROWTHS = 6  # at most this many enlargements of the ellipsoid
 _SHELL = 0.95  # a kept draw beyond this share of the radius means the region may stick out
+_MIN_SHARE = 0.01  # "auto" skips an ellipsoid mostly outside the box (too many draws per kept one)
 _SCALE = 1.25  # first ellipsoid: through the farthest posterior draw in the region, enlarged
 
 
@@ -75,21 +76,31 @@ def _in_box(prior: BoxPrior, theta: np.ndarray) -> np.ndarray:
 
 
 def _in_box_draws(key, m: int, ell: _Ellipsoid, prior: BoxPrior, share: float) -> np.ndarray:
-    """``m`` draws uniform on the ellipsoid's part inside the box (``share`` of it, estimated);
-    the draws outside cost no flow evaluation."""
-    out, got = [], 0
-    for _ in range(100):
-        key, k = jax.random.split(key)
-        cand = ell.sample(k, int(min(4 * m / share, 10**7)))
-        out.append(cand[_in_box(prior, cand)])
-        got += out[-1].shape[0]
-        if got >= m:
-            break
-    return np.concatenate(out)[:m]
+    """``m`` draws uniform on the ellipsoid's part inside the box (``share`` of it, estimated),
+    in chunks of at most 10⁶; the draws outside cost no flow evaluation. Exactly ``m``, so the
+    flow is evaluated on one shape (no recompilation)."""
+
+    def chunk(k, _):
+        cand = ell.sample(k, int(min(1.2 * m / share, 10**6)))
+        return cand[_in_box(prior, cand)]
+
+    return _fill(key, chunk, m)
 
 
 def _box_draws(key, m: int, prior: BoxPrior) -> np.ndarray:
     return np.asarray(prior.sample(key, m), np.float64)
+
+
+def _fill(key, propose, m: int) -> np.ndarray:
+    """Exactly ``m`` draws of ``propose`` (bounded)."""
+    out, got = [], 0
+    for _ in range(1000):
+        key, k = jax.random.split(key)
+        out.append(propose(k, m))
+        got += out[-1].shape[0]
+        if got >= m:
+            break
+    return np.concatenate(out)[:m]
 
 
 def _reject(key, propose, keep, n: int) -> tuple[np.ndarray, int]:
@@ -138,9 +149,8 @@ def truncated_prior(
     for growth in range(_GROWTHS + 1):
         k_pilot, k_draw = jax.random.split(k_draw)
         share = max(float(np.mean(_in_box(prior, ell.sample(k_pilot, 20_000)))), 1e-3)
-        if proposal == "prior" or (
-            proposal == "auto" and ell.log_volume() + math.log(share) >= box_log_volume
-        ):
+        smaller = ell.log_volume() + math.log(share) < box_log_volume
+        if proposal == "prior" or (proposal == "auto" and (not smaller or share < _MIN_SHARE)):
             propose = partial(_box_draws, prior=prior)
             acc, drawn = _reject(k_draw, propose, keep, n)
             info = {"region_proposal": "prior"}
@@ -160,5 +170,5 @@ def truncated_prior(
             f"are drawn from the wider {info['region_proposal']} region (unbiased, less informative)",
             stacklevel=2,
         )
-        acc = np.concatenate([acc, propose(k_fill, n - acc.shape[0])[: n - acc.shape[0]]])
+        acc = np.concatenate([acc, _fill(k_fill, propose, n - acc.shape[0])])
     return jnp.asarray(acc, jnp.float32), info
