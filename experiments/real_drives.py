@@ -131,7 +131,12 @@ def overlay(path, problem, preds: dict[str, np.ndarray]) -> None:
     held = [w for w, win in enumerate(problem.windows) if win.role == "held"]
     chans = [c for c in CHANNELS if c in problem.channels]
     fig, axes = plt.subplots(len(chans), 1, figsize=(11, 2.6 * len(chans)), sharex=True, squeeze=False)
-    colours = {"ours (refined)": "C0", "ours (posterior mean)": "C1", "lab values": "C2", "linear LS baseline": "C3"}
+    colours = {
+        "ours (refined)": "C0",
+        "ours (posterior mean)": "C1",
+        "lab values": "C2",
+        "linear LS baseline": "C3",
+    }
     for k, c in enumerate(chans):
         ax, i = axes[k, 0], problem.channels.index(c)
         for j, w in enumerate(held):
@@ -188,7 +193,9 @@ def run_one(name: str, mode: str, args, out: Path) -> dict:
     for limit in ("exclude", "keep"):
         settings = ProblemSettings(longitudinal=mode, max_window=window, bandwidth=5.0, limit_handling=limit)
         problem = make_problem(rec, veh, settings)
-        preds = {k: by_channel(problem, _predict(problem, v, names, s["effects"])) for k, v in estimates.items()}
+        preds = {
+            k: by_channel(problem, _predict(problem, v, names, s["effects"])) for k, v in estimates.items()
+        }
         speed_problem = problem
         if mode == "torque":
             # The same windows (same recording, same segments), followed by the measured speed.
