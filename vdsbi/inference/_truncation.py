@@ -75,6 +75,11 @@ def _in_box(prior: BoxPrior, theta: np.ndarray) -> np.ndarray:
     return np.all((theta >= np.asarray(prior.low)) & (theta <= np.asarray(prior.high)), axis=1)
 
 
+def _box_share(key, ell: _Ellipsoid, prior: BoxPrior) -> float:
+    """The share of the ellipsoid inside the box (Monte Carlo, floored at 10⁻³)."""
+    return max(float(np.mean(_in_box(prior, ell.sample(key, 20_000)))), 1e-3)
+
+
 def _in_box_draws(key, m: int, ell: _Ellipsoid, prior: BoxPrior, share: float) -> np.ndarray:
     """``m`` draws uniform on the ellipsoid's part inside the box (``share`` of it, estimated),
     in chunks of at most 10⁶; the draws outside cost no flow evaluation. Exactly ``m``, so the
@@ -148,7 +153,7 @@ def truncated_prior(
     box_log_volume = float(jnp.sum(jnp.log(prior.high - prior.low)))
     for growth in range(_GROWTHS + 1):
         k_pilot, k_draw = jax.random.split(k_draw)
-        share = max(float(np.mean(_in_box(prior, ell.sample(k_pilot, 20_000)))), 1e-3)
+        share = 1.0 if proposal == "prior" else _box_share(k_pilot, ell, prior)
         smaller = ell.log_volume() + math.log(share) < box_log_volume
         if proposal == "prior" or (proposal == "auto" and (not smaller or share < _MIN_SHARE)):
             propose = partial(_box_draws, prior=prior)
