@@ -100,6 +100,9 @@ def test_data_parallel_step_on_four_devices():
                 np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-4, atol=1e-6)
         print("OK", TRACE_COUNTS["train_step"])
         """,
-        {"XLA_FLAGS": "--xla_force_host_platform_device_count=4", "JAX_PLATFORMS": "cpu"},
+        {
+            "XLA_FLAGS": f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=4",
+            "JAX_PLATFORMS": "cpu",
+        },
     )
     assert "OK" in out

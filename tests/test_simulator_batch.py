@@ -84,7 +84,11 @@ SHARDED = textwrap.dedent(
 def test_sharded_over_four_host_devices_matches_one(tmp_path):
     out = str(tmp_path / "ys.npy")
     code = SHARDED.format(tests=os.path.dirname(__file__), out=out)
-    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=4", "JAX_PLATFORMS": "cpu"}
+    env = {
+        **os.environ,
+        "XLA_FLAGS": f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=4",
+        "JAX_PLATFORMS": "cpu",
+    }
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     info = json.loads(proc.stdout.strip().splitlines()[-1])
