@@ -27,7 +27,6 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 RESULTS = HERE / "results" / "suite_profile.json"
-SUMMED = ("wall", "backend_compile_duration", "jaxpr_trace_duration", "jaxpr_to_mlir_module_duration")
 
 
 def run_suite(pytest_args: list[str], folder: Path) -> tuple[int, float, str]:
