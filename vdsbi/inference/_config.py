@@ -60,6 +60,9 @@ class NPEConfig:
             or ``"none"``.
         truncation_epsilon: mass outside the HPD region for ``truncate=True`` (TSNPE).
         truncation_samples: posterior samples used to locate the HPD threshold.
+        truncation_widen: widen the HPD region as if the posterior's standard deviations were
+            this many times larger (≥ 1; 1, the default, is the plain HPD region). See
+            `truncated_prior`.
         retrain_from_scratch: re-initialise the flow every round (default: continue training).
         estimator: ``"nsf"`` (default: the spline flow, fields above) or ``"fmpe"``
             (`FlowMatchingEstimator`, trained by flow matching; ``theta_map``, ``x_standardize``
@@ -97,6 +100,7 @@ class NPEConfig:
     x_standardize: str = "channel"
     truncation_epsilon: float = 1e-4
     truncation_samples: int = 10_000
+    truncation_widen: float = 1.0
     retrain_from_scratch: bool = False
     estimator: Literal["nsf", "fmpe"] = "nsf"
     fmpe_hidden: int = 128
@@ -128,6 +132,8 @@ class NPEConfig:
             raise ValueError(f"average_epochs must be >= 0, got {self.average_epochs}")
         if self.ensemble < 1:
             raise ValueError(f"ensemble must be >= 1, got {self.ensemble}")
+        if self.truncation_widen < 1.0:
+            raise ValueError(f"truncation_widen must be >= 1, got {self.truncation_widen}")
         if self.num_atoms < 2:
             raise ValueError("num_atoms must be >= 2")
 

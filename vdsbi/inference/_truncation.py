@@ -122,6 +122,22 @@ def _reject(key, propose, keep, n: int) -> tuple[np.ndarray, int]:
     return np.concatenate(out), drawn
 
 
+def _region_threshold(lp: np.ndarray, epsilon: float, widen: float) -> float:
+    """The log-density level of the region from the flow's log densities ``lp`` at its own draws.
+
+    The ``1 - ε`` HPD level is the ``ε`` quantile of ``lp``. ``widen`` > 1 lowers it: its depth
+    below the highest ``lp`` is multiplied by ``widen²``, which for a Gaussian posterior is the
+    ``1 - ε`` HPD region with every standard deviation times ``widen``, and always a superset.
+    A region that cuts the true posterior's tails biases the next round's fit narrower, whose
+    region cuts deeper: gaussian_linear_uniform 10⁴, sbibm observation 3, ended with posterior
+    standard deviations 0.75-0.9 of the reference's and 1.3 % of the reference draws outside the
+    final 1 - 10⁻⁴ region.
+    """
+    level = float(np.quantile(lp, epsilon))
+    top = float(np.max(lp))
+    return top - widen**2 * (top - level)
+
+
 def truncated_prior(
     key: PRNGKeyArray,
     flow: ConditionalFlow,
@@ -132,7 +148,8 @@ def truncated_prior(
     *,
     proposal: str = "auto",
 ) -> tuple[Array, dict[str, Any]]:
-    """``n`` draws of the prior restricted to the ``1 - ε`` HPD region of ``flow`` at ``x_o``.
+    """``n`` draws of the prior restricted to the ``1 - ε`` HPD region of ``flow`` at ``x_o``
+    (widened by ``config.truncation_widen``, see `_region_threshold`).
 
     ``proposal``: ``"auto"`` (the ellipsoid when its part inside the box is smaller than the
     box; a posterior with far-flung draws can make it larger), ``"prior"`` or
@@ -144,12 +161,12 @@ def truncated_prior(
     k_ref, k_draw, k_fill = jax.random.split(key, 3)
     ref = np.asarray(_sample(flow, k_ref, x_o, config.truncation_samples))
     lp = np.asarray(_log_prob(flow, jnp.asarray(ref), x_o))
-    threshold = float(np.quantile(lp, config.truncation_epsilon))
+    threshold = _region_threshold(lp, config.truncation_epsilon, config.truncation_widen)
 
     def keep(theta):  # the flow's density is -inf outside the box
         return np.asarray(_log_prob(flow, jnp.asarray(theta, jnp.float32), x_o)) >= threshold
 
-    ell = _Ellipsoid.around(ref[lp >= threshold], _SCALE)
+    ell = _Ellipsoid.around(ref[lp >= threshold], _SCALE * config.truncation_widen)
     box_log_volume = float(jnp.sum(jnp.log(prior.high - prior.low)))
     for growth in range(_GROWTHS + 1):
         k_pilot, k_draw = jax.random.split(k_draw)
