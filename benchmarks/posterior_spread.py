@@ -23,9 +23,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _sbibm  # noqa: E402
-from sbi_tasks import HERE, SEQUENTIAL, _parse_overrides, _provenance, config_for  # noqa: E402
+from sbi_tasks import HERE, _parse_overrides, _provenance, config_for, train_posterior  # noqa: E402
 
-from vdsbi.inference import IdentityEmbedding, apt  # noqa: E402
 from vdsbi.inference._posterior import _log_prob  # noqa: E402
 from vdsbi.tasks import get_task  # noqa: E402
 
@@ -37,18 +36,7 @@ def spread(task_name, method, budget, i, overrides, seed=0, num=10_000):
     key = jax.random.fold_in(jax.random.key(seed), budget)
     x_o = _sbibm.observation(task_name, i)
     ref = np.asarray(_sbibm.reference_posterior_samples(task_name, i)[:num], np.float32)
-    seq = method in SEQUENTIAL
-    post, state = apt(
-        jax.random.fold_in(key, i) if seq else key,
-        task.simulate,
-        task.prior,
-        x_o,
-        embedding=IdentityEmbedding(task.dim_x),
-        rounds=10 if seq else 1,
-        sims_per_round=budget // 10 if seq else budget,
-        config=cfg,
-        truncate=method == "tsnpe",
-    )
+    post, state = train_posterior(task, method, budget, cfg, key, x_o, i)
     draws = np.asarray(post.sample(jax.random.fold_in(key, 1000 + i), num, x=x_o))
     lp_draws = np.asarray(_log_prob(post.flow, jnp.asarray(draws), x_o))
     lp_ref = np.asarray(_log_prob(post.flow, jnp.asarray(ref), x_o))

@@ -154,6 +154,24 @@ def _provenance():
     }
 
 
+def train_posterior(task, method, budget, cfg, key, x_o, obs_id=None):
+    """``(posterior, state)`` as the grid trains it: NPE/FMPE amortised (one round of ``budget``
+    from ``key``), APT/TSNPE for observation ``obs_id`` (10 rounds of budget/10, ``key`` folded
+    with ``obs_id``)."""
+    seq = method in SEQUENTIAL
+    return apt(
+        jax.random.fold_in(key, obs_id) if seq else key,
+        task.simulate,
+        task.prior,
+        x_o,
+        embedding=IdentityEmbedding(task.dim_x),
+        rounds=10 if seq else 1,
+        sims_per_round=budget // 10 if seq else budget,
+        config=cfg,
+        truncate=method == "tsnpe",
+    )
+
+
 def run_cell(
     task_name, method, budget, obs_ids, num_samples, seed, source="sbibm", overrides=None, c2st_jobs=1
 ):
@@ -162,22 +180,12 @@ def run_cell(
     task = get_task(task_name)
     obs = _Observations(task, source, c2st_jobs)
     cfg = config_for(budget, method, **(overrides or {}))
-    emb = IdentityEmbedding(task.dim_x)
     key = jax.random.fold_in(jax.random.key(seed), budget)
     run = {"obs_ids": list(obs_ids), **_provenance()}
     records = []
     if method in ("npe", "fmpe"):
         t0 = time.perf_counter()
-        post, state = apt(
-            key,
-            task.simulate,
-            task.prior,
-            obs.x(1),
-            embedding=emb,
-            rounds=1,
-            sims_per_round=budget,
-            config=cfg,
-        )
+        post, state = train_posterior(task, method, budget, cfg, key, obs.x(1))
         run.update(train_s=time.perf_counter() - t0, rounds=_rounds(state), invalid=int(state.num_invalid))
         print(f"  {task_name} {method} {budget}: trained in {run['train_s']:.1f} s", flush=True)
     for i in obs_ids:
@@ -185,17 +193,7 @@ def run_cell(
         if method in SEQUENTIAL:
             release_compiled_programs()  # a long grid stays under the memory-map limit
             t0 = time.perf_counter()
-            post, state = apt(
-                jax.random.fold_in(key, i),
-                task.simulate,
-                task.prior,
-                x_o,
-                embedding=emb,
-                rounds=10,
-                sims_per_round=budget // 10,
-                config=cfg,
-                truncate=method == "tsnpe",
-            )
+            post, state = train_posterior(task, method, budget, cfg, key, x_o, i)
             rec.update(
                 train_s=time.perf_counter() - t0, rounds=_rounds(state), invalid=int(state.num_invalid)
             )
