@@ -3,7 +3,8 @@
 Loaded with ``-p _compile_events`` (``benchmarks/`` on ``PYTHONPATH``). It listens to JAX's
 monitoring events (tracing, lowering to MLIR, XLA's backend compile, persistent-cache savings)
 and writes, at the end of the session, one JSON per process (each xdist worker its own) into
-``$VDSBI_COMPILE_EVENTS_DIR``: ``{test id: {event: seconds, "n_compiles": n, "wall": s}}``.
+``$VDSBI_COMPILE_EVENTS_DIR``: ``{test id: {event: seconds, "n_compiles": n, "wall": s}}``, and
+the failed tests, one per line with the last line of their error, beside it (``<worker>.failed``).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ EVENTS = (
 
 _current = {"test": "<collection>"}
 _stats: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
+_failed: list[str] = []
 
 
 def _on_duration(event: str, duration: float, **_) -> None:
@@ -38,6 +40,13 @@ def _on_duration(event: str, duration: float, **_) -> None:
 
 
 jax.monitoring.register_event_duration_secs_listener(_on_duration)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    report = (yield).get_result()
+    if report.failed:
+        _failed.append(f"{item.nodeid} ({report.when}): {str(report.longrepr).strip().splitlines()[-1]}")
 
 
 @pytest.hookimpl(hookwrapper=True)
@@ -54,3 +63,4 @@ def pytest_sessionfinish(session):
         worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
         out = {test: dict(c) for test, c in _stats.items()}
         (Path(folder) / f"{worker}.json").write_text(json.dumps(out))
+        (Path(folder) / f"{worker}.failed").write_text("\n".join(_failed))

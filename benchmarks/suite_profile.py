@@ -73,7 +73,9 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         code, wall, last = run_suite(args.pytest_args, Path(tmp))
         files = per_file(Path(tmp))
+        failed = sorted(line for f in Path(tmp).glob("*.failed") for line in f.read_text().splitlines())
     print(f"pytest {' '.join(args.pytest_args)}: exit {code}, {wall:.0f} s wall; {last}")
+    print("".join(f"FAILED {line}\n" for line in failed), end="")
     print(table(files, args.top))
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True)
     result = {
@@ -81,6 +83,7 @@ def main(argv=None) -> int:
         "exit_code": code,
         "wall_s": wall,
         "summary": last,
+        "failed": failed,
         "commit": commit.stdout.strip(),
         "xla_flags": os.environ.get("XLA_FLAGS", "(tests/conftest.py's)"),
         "load_average": os.getloadavg(),

@@ -99,7 +99,9 @@ def test_sharded_over_four_host_devices_matches_one(tmp_path):
     assert info["ok"] == np.asarray(ok).tolist() == [True, True, False, True, True, True]
     sharded = np.load(out)
     good = np.asarray(ok)
-    np.testing.assert_allclose(sharded[good], np.asarray(ys)[good], rtol=1e-6, atol=1e-6)
+    # Not bit for bit: a shard's batch of 2 is vectorised differently from a batch of 6, and
+    # float32 rounding differs by a few ulps after ~1200 RK4 steps (9e-6 with the tests' XLA flags).
+    np.testing.assert_allclose(sharded[good], np.asarray(ys)[good], rtol=3e-5, atol=3e-5)
 
 
 # ---------------------------------------------------------------- bad input at the boundary
