@@ -15,9 +15,9 @@ os.environ["XLA_FLAGS"] = " ".join(
 ).strip()
 
 import jax  # noqa: E402
-import jax.numpy as jnp
-import numpy as np
-import pytest
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 
 # `vdsbi` processes the tests start keep no compiled programs in the user's cache folder
 # (test_cli_identify checks the cache with a folder of its own).

@@ -147,6 +147,25 @@ def test_compilation_cache_folder_from_the_environment(tmp_path):
     assert compilation_cache_dir(jax_own) is None
 
 
+def test_the_command_adds_its_xla_flags_and_keeps_the_users():
+    from vdsbi.cli._main import xla_flags
+
+    assert xla_flags({}) == "--xla_cpu_use_fusion_emitters=false"
+    own = "--xla_force_host_platform_device_count=4"
+    assert xla_flags({"XLA_FLAGS": own}) == f"{own} --xla_cpu_use_fusion_emitters=false"
+    mine = "--xla_cpu_use_fusion_emitters=true"
+    assert xla_flags({"XLA_FLAGS": mine}) == mine
+
+
+def test_the_xla_flags_reach_a_command_started_by_entry(tmp_path):
+    """A `vdsbi check --help` process started through `entry` runs with them."""
+    code = "import os, sys; from vdsbi.cli._main import entry; sys.argv = ['vdsbi', 'check', '--help']\n"
+    code += "import atexit; atexit.register(lambda: print('FLAGS=' + os.environ['XLA_FLAGS']))\nentry()"
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert "FLAGS=--xla_cpu_use_fusion_emitters=false" in proc.stdout, proc.stderr[-2000:]
+
+
 def _numbers(run_dir: Path) -> tuple[np.ndarray, dict]:
     post = json.loads((run_dir / "posterior.json").read_text())
     return pd.read_csv(run_dir / "samples.csv").to_numpy(), post["parameters"]
