@@ -4,15 +4,13 @@ import os
 # The suite is compile-bound: XLA compiling took 1482 of its 2042 CPU seconds (s18, per-test
 # compile events). LLVM at -O0 compiles ~40 % faster and runs slower, a net gain here; results
 # move only by float32 rounding (a process stays deterministic), which no test may rely on since
-# another CPU rounds differently too. Users, benchmarks and experiments keep XLA's default.
-# XLA's older loop emitters (`--xla_cpu_use_fusion_emitters=false`) compile another ~1/3 faster
-# (tests/test_design.py: 51 s -> 34 s at -O0, s20). Subprocesses inherit both; name either flag
-# in XLA_FLAGS yourself to test with another value.
-_TEST_FLAGS = {"xla_backend_optimization_level": "0", "xla_cpu_use_fusion_emitters": "false"}
-_flags = os.environ.get("XLA_FLAGS", "")
-os.environ["XLA_FLAGS"] = " ".join(
-    [_flags] + [f"--{k}={v}" for k, v in _TEST_FLAGS.items() if k not in _flags]
-).strip()
+# another CPU rounds differently too. Users, benchmarks and experiments keep XLA's default level.
+# The tests also compile as the `vdsbi` command does, with XLA's older loop emitters (~1/3 less
+# compile again: tests/test_design.py 51 -> 34 s at -O0, s20). Subprocesses inherit the flags;
+# name one in XLA_FLAGS yourself to test with another value.
+from vdsbi.cli._main import CLI_XLA_FLAGS, xla_flags  # noqa: E402  (no backend started yet)
+
+os.environ["XLA_FLAGS"] = xla_flags(os.environ, {**CLI_XLA_FLAGS, "xla_backend_optimization_level": "0"})
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402

@@ -158,8 +158,10 @@ def test_the_command_adds_its_xla_flags_and_keeps_the_users():
 
 
 def test_the_xla_flags_reach_a_command_started_by_entry(tmp_path):
-    """A `vdsbi check --help` process started through `entry` runs with them."""
+    """A `vdsbi check --help` process started through `entry` runs with them, and importing the
+    command starts no JAX backend (XLA would read its flags before `entry` sets them)."""
     code = "import os, sys; from vdsbi.cli._main import entry; sys.argv = ['vdsbi', 'check', '--help']\n"
+    code += "from jax._src import xla_bridge; assert not xla_bridge._backends, 'a backend started'\n"
     code += "import atexit; atexit.register(lambda: print('FLAGS=' + os.environ['XLA_FLAGS']))\nentry()"
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)

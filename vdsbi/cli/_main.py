@@ -90,10 +90,10 @@ def _use_compilation_cache(folder: Path | None) -> None:
 CLI_XLA_FLAGS = {"xla_cpu_use_fusion_emitters": "false"}
 
 
-def xla_flags(environ=os.environ) -> str:
-    """``XLA_FLAGS`` for the `vdsbi` process: the user's, plus `CLI_XLA_FLAGS` they do not name."""
+def xla_flags(environ=os.environ, flags: dict[str, str] = CLI_XLA_FLAGS) -> str:
+    """``XLA_FLAGS`` for the `vdsbi` process: the user's, plus those of ``flags`` they do not name."""
     own = environ.get("XLA_FLAGS", "")
-    added = [f"--{k}={v}" for k, v in CLI_XLA_FLAGS.items() if k not in own]
+    added = [f"--{k}={v}" for k, v in flags.items() if k not in own]
     return " ".join([own, *added]).strip()
 
 
