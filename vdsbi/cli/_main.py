@@ -84,9 +84,10 @@ def _use_compilation_cache(folder: Path | None) -> None:
 
 
 #: XLA flags the `vdsbi` command adds unless the user's ``XLA_FLAGS`` names them. XLA:CPU's
-#: older loop emitters compile the simulator faster and run it no slower (s20, default
-#: optimisation level: 5000 draws x 5 s compiled in 2.5 s instead of 3.9 s and ran in 1.16 s
-#: instead of 1.54 s; `vdsbi demo --quick` 226 -> 179 s). Results move by float32 rounding only.
+#: older loop emitters compiled faster and ran no slower in every A/B of s20 (default
+#: optimisation level; `vdsbi demo --quick` 226 -> 179 s, the simulator's 5000 draws compiled in
+#: 2.5 s instead of 3.9 s, and 2.3 instead of 2.5 s in a repeat). Results move by float32
+#: rounding only.
 CLI_XLA_FLAGS = {"xla_cpu_use_fusion_emitters": "false"}
 
 
