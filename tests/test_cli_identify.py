@@ -157,7 +157,7 @@ def test_the_command_adds_its_xla_flags_and_keeps_the_users():
     assert xla_flags({"XLA_FLAGS": mine}) == mine
 
 
-def test_the_xla_flags_reach_a_command_started_by_entry(tmp_path):
+def test_the_xla_flags_reach_a_command_started_by_entry():
     """A `vdsbi check --help` process started through `entry` runs with them, and importing the
     command starts no JAX backend (XLA would read its flags before `entry` sets them)."""
     code = "import os, sys; from vdsbi.cli._main import entry; sys.argv = ['vdsbi', 'check', '--help']\n"
