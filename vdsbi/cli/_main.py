@@ -83,11 +83,9 @@ def _use_compilation_cache(folder: Path | None) -> None:
     jax.config.update("jax_compilation_cache_max_size", CACHE_MAX_BYTES)
 
 
-#: XLA flags the `vdsbi` command adds unless the user's ``XLA_FLAGS`` names them. XLA:CPU's
-#: older loop emitters compiled faster and ran no slower in every A/B of s20 (default
-#: optimisation level; `vdsbi demo --quick` 226 -> 179 s, the simulator's 5000 draws compiled in
-#: 2.5 s instead of 3.9 s, and 2.3 instead of 2.5 s in a repeat). Results move by float32
-#: rounding only.
+#: XLA flags the `vdsbi` command adds unless the user's ``XLA_FLAGS`` names them: XLA:CPU's older
+#: loop emitters compiled faster and ran no slower in every A/B measured (README, "Using it on
+#: your own drive"); results move by float32 rounding only.
 CLI_XLA_FLAGS = {"xla_cpu_use_fusion_emitters": "false"}
 
 
