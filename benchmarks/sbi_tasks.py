@@ -91,11 +91,14 @@ def config_for(budget: int, method: str = "npe", **overrides) -> NPEConfig:
     24 s per observation); at 10⁴ with a floor of 200 gradient steps it ran 3-4 times faster but
     scored worse on most observations (``results/apt_patience/``).
 
-    NPE averages its weights over one epoch (``average_epochs=1``): on two_moons 10⁵ the
-    unaveraged run stopped on validation noise at 60 epochs (0.548 ± 0.036, 10 observations)
+    NPE and APT average their weights over one epoch (``average_epochs=1``): on two_moons 10⁵
+    the unaveraged NPE stopped on validation noise at 60 epochs (0.548 ± 0.036, 10 observations)
     and the averaged one at 240 (0.513 ± 0.019); gaussian_linear_uniform 10⁴ 0.566 → 0.551 and
-    10⁵ 0.518 → 0.509 on observations 1-3 (``results/ema/``). TSNPE at 10⁴ did not change
-    (0.554/0.553 either way), so the sequential methods keep the library's default (off).
+    10⁵ 0.518 → 0.509 on observations 1-3 (``results/ema/``). APT at 10⁴, observations 1-3
+    (``results/apt_ema/``): gaussian_linear_uniform 0.575 → 0.537, two_moons 0.541 → 0.513, at
+    about 1.8x the time (its later rounds no longer stop on the atomic loss's SGD noise within a
+    few epochs). TSNPE at 10⁴ did not change (0.554/0.553 either way): it keeps the library's
+    default (off).
     """
     base = NPEConfig(
         batch_size=128 if budget <= 10_000 else 512,
@@ -104,7 +107,7 @@ def config_for(budget: int, method: str = "npe", **overrides) -> NPEConfig:
         max_epochs=500,
         theta_map="affine",
         patience_unit="epochs" if method in SEQUENTIAL else NPEConfig.patience_unit,
-        average_epochs=1.0 if method == "npe" else NPEConfig.average_epochs,
+        average_epochs=1.0 if method in ("npe", "apt") else NPEConfig.average_epochs,
     )
     return dataclasses.replace(base, **{**(FMPE if method == "fmpe" else {}), **overrides})
 
@@ -291,11 +294,22 @@ def table(results) -> str:
                     cells.append(f"not run{ref}")
                 else:
                     mark = "" if pub is None else (" ✓" if r["c2st_mean"] <= pub else " ✗")
+                    stale = "" if current(r) else " †"
                     cells.append(
-                        f"{r['c2st_mean']:.3f}±{r['c2st_sd']:.3f} n={r['n_obs']}{ref}{mark} [{r['train_s']:.0f}s]"
+                        f"{r['c2st_mean']:.3f}±{r['c2st_sd']:.3f} n={r['n_obs']}{ref}{mark}{stale} "
+                        f"[{r['train_s']:.0f}s]"
                     )
             lines.append(f"| {t} | {m} | " + " | ".join(cells) + " |")
+    if not all(current(r) for r in results):
+        lines.append(
+            "\n† run with other settings than `config_for` gives now (the cell's `config` says which)."
+        )
     return "\n".join(lines)
+
+
+def current(cell) -> bool:
+    """Whether a stored cell ran with the settings `config_for` gives its method and budget now."""
+    return same_config(cell["config"], dataclasses.asdict(config_for(cell["budget"], cell["method"])))
 
 
 def main():
@@ -325,6 +339,11 @@ def main():
     ap.add_argument("--c2st-jobs", type=int, default=1, help="parallel C2ST folds (same result as 1)")
     ap.add_argument("--table", action="store_true", help="only rewrite the .md table from the JSON")
     ap.add_argument("--out", default=os.path.join(HERE, "results", "sbi_tasks.json"))
+    ap.add_argument(
+        "--merge-from",
+        metavar="JSON",
+        help="only join to --out the cells of another results file that ran with the current settings",
+    )
     args = ap.parse_args()
     overrides = {} if args.patience_unit is None else {"patience_unit": args.patience_unit}
     overrides.update(_parse_overrides(args.set))
@@ -333,6 +352,8 @@ def main():
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     if args.table:
         return _write_md(args.out, _load(args.out))
+    if args.merge_from:
+        return _merge_from(args.merge_from, args.out, args.observations)
     if _source(args.out) not in (None, args.observations):  # never mix the two protocols
         raise SystemExit(f"{args.out} holds {_source(args.out)!r} observations; pass another --out")
     obs_ids = list(range(args.first_obs, args.first_obs + args.n_obs))
@@ -352,6 +373,20 @@ def main():
             )
             results = _save(args.out, cell, args.observations, replace=args.force and j == 0)
         print(table(results), flush=True)
+
+
+def _merge_from(src, out, source):
+    """The cells of ``src`` (e.g. a variant whose settings became `config_for`'s) joined to
+    ``out`` by `merge`, as if run there; a cell with other settings is skipped, and said so."""
+    if _source(src) != source:
+        raise SystemExit(f"{src} holds {_source(src)!r} observations, not {source!r}")
+    for cell in _load(src):
+        if not current(cell):
+            print(f"skipped {' '.join(map(str, _key(cell)))}: other settings than config_for's")
+            continue
+        _save(out, cell, source)
+        print(f"joined {' '.join(map(str, _key(cell)))} observations {cell['obs_ids']}")
+    print(table(_load(out)))
 
 
 def _parse_overrides(items):
