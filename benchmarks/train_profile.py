@@ -19,9 +19,10 @@ epoch 1 (data split, flow initialisation, the compilations of the step and valid
 ``steady_epoch_s`` is the median epoch after it.
 
 ``--steps``: compiled-step throughput (``train_steps`` in blocks of 32, after compilation) of
-the maximum-likelihood and atomic losses at each batch size, and the first call's seconds.
+the maximum-likelihood and atomic losses at each batch size, without and with the weight
+average (``+average``), and the first call's seconds.
 
-``--apt``: one APT run (observation 1, 10 rounds of budget/10) with per-round simulations,
+``--apt``: one APT run (observation 1, 10 rounds of budget/10, the grid's APT settings) with per-round simulations,
 epochs, wall seconds, and how many times the step / validation loops were traced.
 """
 
@@ -124,8 +125,9 @@ def npe_profile(task_name: str, budget: int, seed: int = 0) -> dict:
     }
 
 
-def steps_per_second(task, loss, batch_size, seconds=3.0, steps=32) -> dict:
-    """Throughput of ``train_steps`` (blocks of ``steps``) after one compiling call."""
+def steps_per_second(task, loss, batch_size, seconds=3.0, steps=32, average=False) -> dict:
+    """Throughput of ``train_steps`` (blocks of ``steps``) after one compiling call; ``average``:
+    with the weight average of ``NPEConfig.average_epochs`` updated after every step."""
     key = jax.random.key(0)
     theta = np.asarray(task.prior.sample(key, 4096), np.float32)
     x = np.asarray(task.simulate(jax.random.key(1), theta)[0], np.float32)
@@ -137,14 +139,20 @@ def steps_per_second(task, loss, batch_size, seconds=3.0, steps=32) -> dict:
     idx = np.random.default_rng(0).integers(0, len(theta), (steps, batch_size))
     batches = stack_batches((theta[idx], x[idx], np.ones(idx.shape, bool)), mesh)
     keys = jax.random.split(key, steps)
+    live = np.ones(steps, bool)
+    avg = (flow, replicate(jax.numpy.asarray(0.99), mesh)) if average else None
+
+    def call(flow, state, avg):
+        out = train_steps(flow, state, batches, keys, loss, opt, live, avg)
+        out[2].block_until_ready()
+        return out[0], out[1], None if avg is None else (out[3], avg[1])
+
     t0 = time.perf_counter()
-    flow, state, m = train_steps(flow, state, batches, keys, loss, opt)
-    m.block_until_ready()
+    flow, state, avg = call(flow, state, avg)
     first = time.perf_counter() - t0
     t0, n = time.perf_counter(), 0
     while time.perf_counter() - t0 < seconds:
-        flow, state, m = train_steps(flow, state, batches, keys, loss, opt)
-        m.block_until_ready()
+        flow, state, avg = call(flow, state, avg)
         n += steps
     return {"steps_per_s": n / (time.perf_counter() - t0), "first_call_s": first}
 
@@ -252,11 +260,13 @@ def main():
         task = get_task(name)
         for loss in (MaximumLikelihoodLoss(), AtomicLoss(num_atoms=10)):
             for b in args.batch_sizes:
-                res = {**steps_per_second(task, loss, b), **_context()}
-                out.setdefault("steps", {})[f"{name}/{type(loss).__name__}@{b}"] = res
-                print(f"{name} {type(loss).__name__} batch {b}: {res['steps_per_s']:.1f} steps/s", flush=True)
+                for average in (False, True):  # what the weight average adds to a step
+                    res = {**steps_per_second(task, loss, b, average=average), **_context()}
+                    label = f"{type(loss).__name__}{'+average' if average else ''}"
+                    out.setdefault("steps", {})[f"{name}/{label}@{b}"] = res
+                    print(f"{name} {label} batch {b}: {res['steps_per_s']:.1f} steps/s", flush=True)
     for name in args.apt:
-        res = apt_rounds(get_task(name), args.budget, config_for(args.budget))
+        res = apt_rounds(get_task(name), args.budget, config_for(args.budget, "apt"))
         out.setdefault("apt", {})[f"{name}@{args.budget}"] = res
         print(f"{name} APT {args.budget}: {res['total_s']:.1f} s", flush=True)
     if args.quick:
