@@ -95,9 +95,9 @@ def config_for(budget: int, method: str = "npe", **overrides) -> NPEConfig:
     the unaveraged NPE stopped on validation noise at 60 epochs (0.548 ± 0.036, 10 observations)
     and the averaged one at 240 (0.513 ± 0.019); gaussian_linear_uniform 10⁴ 0.566 → 0.551 and
     10⁵ 0.518 → 0.509 on observations 1-3 (``results/ema/``). APT at 10⁴, observations 1-3
-    (``results/apt_ema/``): gaussian_linear_uniform 0.575 → 0.537, two_moons 0.541 → 0.513, at
-    about 1.8x the time (its later rounds no longer stop on the atomic loss's SGD noise within a
-    few epochs). TSNPE at 10⁴ did not change (0.554/0.553 either way): it keeps the library's
+    (``results/apt_ema/``): gaussian_linear_uniform 0.575 → 0.537, two_moons 0.541 → 0.513 (its
+    later rounds no longer stop on the atomic loss's SGD noise within a few epochs; the average
+    adds nothing to a step's cost, ``train_profile.py --steps``). TSNPE at 10⁴ did not change (0.554/0.553 either way): it keeps the library's
     default (off).
     """
     base = NPEConfig(
@@ -378,8 +378,9 @@ def main():
 def _merge_from(src, out, source):
     """The cells of ``src`` (e.g. a variant whose settings became `config_for`'s) joined to
     ``out`` by `merge`, as if run there; a cell with other settings is skipped, and said so."""
-    if _source(src) != source:
-        raise SystemExit(f"{src} holds {_source(src)!r} observations, not {source!r}")
+    for path in (src, out):  # never mix the two protocols
+        if _source(path) not in (None, source) or _source(src) is None:
+            raise SystemExit(f"{path} holds {_source(path)!r} observations, not {source!r}")
     for cell in _load(src):
         if not current(cell):
             print(f"skipped {' '.join(map(str, _key(cell)))}: other settings than config_for's")
