@@ -97,8 +97,8 @@ def config_for(budget: int, method: str = "npe", **overrides) -> NPEConfig:
     10⁵ 0.518 → 0.509 on observations 1-3 (``results/ema/``). APT at 10⁴, observations 1-3
     (``results/apt_ema/``): gaussian_linear_uniform 0.575 → 0.537, two_moons 0.541 → 0.513 (its
     later rounds no longer stop on the atomic loss's SGD noise within a few epochs; the average
-    adds nothing to a step's cost, ``train_profile.py --steps``). TSNPE at 10⁴ did not change (0.554/0.553 either way): it keeps the library's
-    default (off).
+    adds nothing to a step's cost, ``train_profile.py --steps``). TSNPE at 10⁴ did not change
+    (0.554/0.553 either way): it keeps the library's default (off).
     """
     base = NPEConfig(
         batch_size=128 if budget <= 10_000 else 512,
@@ -280,6 +280,7 @@ def todo(old, method, config, obs_ids):
 
 def table(results) -> str:
     by = {(r["task"], r["method"], r["budget"]): r for r in results}
+    stale = {_key(r) for r in results if not current(r)}
     methods = ["npe", "apt"] + sorted({r["method"] for r in results} - {"npe", "apt"})
     head = "| task | method | " + " | ".join(f"{b:.0e}" for b in BUDGETS) + " |"
     lines = [head, "|---|---|" + "---|" * len(BUDGETS)]
@@ -294,13 +295,13 @@ def table(results) -> str:
                     cells.append(f"not run{ref}")
                 else:
                     mark = "" if pub is None else (" ✓" if r["c2st_mean"] <= pub else " ✗")
-                    stale = "" if current(r) else " †"
+                    dagger = " †" if _key(r) in stale else ""
                     cells.append(
-                        f"{r['c2st_mean']:.3f}±{r['c2st_sd']:.3f} n={r['n_obs']}{ref}{mark}{stale} "
+                        f"{r['c2st_mean']:.3f}±{r['c2st_sd']:.3f} n={r['n_obs']}{ref}{mark}{dagger} "
                         f"[{r['train_s']:.0f}s]"
                     )
             lines.append(f"| {t} | {m} | " + " | ".join(cells) + " |")
-    if not all(current(r) for r in results):
+    if stale:
         lines.append(
             "\n† run with other settings than `config_for` gives now (the cell's `config` says which)."
         )
@@ -352,10 +353,10 @@ def main():
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     if args.table:
         return _write_md(args.out, _load(args.out))
-    if args.merge_from:
-        return _merge_from(args.merge_from, args.out, args.observations)
     if _source(args.out) not in (None, args.observations):  # never mix the two protocols
         raise SystemExit(f"{args.out} holds {_source(args.out)!r} observations; pass another --out")
+    if args.merge_from:
+        return _merge_from(args.merge_from, args.out, args.observations)
     obs_ids = list(range(args.first_obs, args.first_obs + args.n_obs))
     cells = [(b, m, t) for b in sorted(args.budgets) for m in args.methods for t in args.tasks]
     for b, m, t in cells:
@@ -378,9 +379,8 @@ def main():
 def _merge_from(src, out, source):
     """The cells of ``src`` (e.g. a variant whose settings became `config_for`'s) joined to
     ``out`` by `merge`, as if run there; a cell with other settings is skipped, and said so."""
-    for path in (src, out):  # never mix the two protocols
-        if _source(path) not in (None, source) or _source(src) is None:
-            raise SystemExit(f"{path} holds {_source(path)!r} observations, not {source!r}")
+    if _source(src) != source:  # never mix the two protocols (``out`` is checked by `main`)
+        raise SystemExit(f"{src} holds {_source(src)!r} observations, not {source!r}")
     for cell in _load(src):
         if not current(cell):
             print(f"skipped {' '.join(map(str, _key(cell)))}: other settings than config_for's")
