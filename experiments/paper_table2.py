@@ -187,6 +187,7 @@ def main(argv=None) -> dict:
             "truncate": settings.truncate,
             "config": dataclasses.asdict(settings.npe_config),
         },
+        "device": f"{jax.devices()[0].platform}:{jax.devices()[0].device_kind}",
         "load_average_at_start": load_start,
         # 1-, 5-, 15-minute load at the end: other work on the 2 cores slows the run
         "load_average_at_end": list(os.getloadavg()),
@@ -235,7 +236,8 @@ def main(argv=None) -> dict:
         "",
         f"Wall time: simulation {timing['simulation']:.0f} s, training {timing['training']:.0f} s, "
         f"sampling {timing['sampling']:.1f} s, total {timing['total']:.0f} s "
-        f"(target ≤ {TARGET_S} s: {'met' if timing['total'] <= TARGET_S else '**missed**'}); "
+        f"(target ≤ {TARGET_S} s: {'met' if timing['total'] <= TARGET_S else '**missed**'}) "
+        f"on {result['device']}; "
         f"load average at start {load_start:.2f}, at end {os.getloadavg()[0]:.2f} (1 min) / "
         f"{os.getloadavg()[1]:.2f} (5 min).",
         f"Invalid simulations excluded: {state.num_invalid}.",
