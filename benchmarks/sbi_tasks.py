@@ -443,10 +443,9 @@ def _save(path, result, source, replace=False):
             for i, (b, m, t) in enumerate((b, m, t) for b in BUDGETS for m in methods for t in TASKS)
         }
         results = sorted(stored.values(), key=lambda r: order.get(_key(r), len(order)))
-        d = jax.devices()[0]
+        # The cells' own devices, not this process's: a merge may join cells run elsewhere.
         meta = {
-            "devices": [str(d) for d in jax.devices()],
-            "device": f"{d.platform}:{d.device_kind}",
+            "device": ", ".join(sorted({run["device"] for r in results for run in r["runs"]})),
             "config": {str(b): dataclasses.asdict(config_for(b)) for b in BUDGETS},
             "protocol": __doc__,
         }
