@@ -84,12 +84,15 @@ def config_for(budget: int, method: str = "npe", **overrides) -> NPEConfig:
     0.580 → 0.544 with every seed and observation better (``vs_sbi_variants.py``). The
     library's default stays ``"logit"`` (vehicle identification relies on it).
 
-    APT and TSNPE count their patience in epochs, as sbi's SNPE-C (the method sbibm's SNPE
-    figures come from). The library's default scales a continued round's patience by its share
-    of new data, which at 10 rounds x 100 left round 10 two epochs and scored two_moons 10³
-    0.739 ± 0.041 against 0.633 ± 0.058 with epochs (sbibm observations 1-10, same seeds; 7 vs
-    24 s per observation); at 10⁴ with a floor of 200 gradient steps it ran 3-4 times faster but
-    scored worse on most observations (``results/apt_patience/``).
+    TSNPE, and APT at 10³, count their patience in epochs, as sbi's SNPE-C (the method sbibm's
+    SNPE figures come from). The library's default scales a continued round's patience by its
+    share of new data, which at 10 rounds x 100 left round 10 two epochs and scored two_moons
+    10³ 0.739 ± 0.041 against 0.633 ± 0.058 with epochs (sbibm observations 1-10, same seeds; 7
+    vs 24 s per observation). Without weight averaging it also scored worse at 10⁴ (3-4 times
+    faster; ``results/apt_patience/``). With averaging, APT at 10⁴ keeps the default: on sbibm
+    observations 1-3 gaussian_linear_uniform scored the same (0.532/0.537/0.542) in 57-99 s
+    instead of 236 s, two_moons 0.526/0.526/0.538 against 0.498/0.517/0.525 in 51-84 s
+    instead of 226 s (``results/apt_patience/ema_new_data.json``).
 
     NPE and APT average their weights over one epoch (``average_epochs=1``): on two_moons 10⁵
     the unaveraged NPE stopped on validation noise at 60 epochs (0.548 ± 0.036, 10 observations)
@@ -106,7 +109,7 @@ def config_for(budget: int, method: str = "npe", **overrides) -> NPEConfig:
         patience=20,
         max_epochs=500,
         theta_map="affine",
-        patience_unit="epochs" if method in SEQUENTIAL else NPEConfig.patience_unit,
+        patience_unit="epochs" if method == "tsnpe" or (method == "apt" and budget < 10_000) else "new_data",
         average_epochs=1.0 if method in ("npe", "apt") else NPEConfig.average_epochs,
     )
     return dataclasses.replace(base, **{**(FMPE if method == "fmpe" else {}), **overrides})
