@@ -4,7 +4,6 @@ what was run where. Synthetic cells, no training."""
 import dataclasses
 import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import pytest
@@ -17,8 +16,7 @@ def grid():
     spec = importlib.util.spec_from_file_location("sbi_tasks", ROOT / "benchmarks" / "sbi_tasks.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    yield module
-    sys.modules.pop("sbi_tasks", None)
+    return module
 
 
 def cell(grid, method, obs_scores, device="cpu:cpu", budget=10_000, **overrides):
