@@ -9,7 +9,7 @@ Measures, in one run, at the seed's maneuver (5 s at 200 Hz, default float32 RK4
   port of the same right-hand side: measured on a few draws and extrapolated per draw;
 * (b) a numpy RK4 vectorised over the batch at the same 2.5 ms step and dtype;
 * the sharded path on 4, 2 and 1 forced host devices, in subprocesses (the main run uses the
-  devices of the calling environment: one CPU device unless ``VDSBI_CPU_DEVICES=auto|N``, see
+  devices of the calling environment: one CPU device per core unless ``VDSBI_CPU_DEVICES=N``, see
   ``vdsbi/simulator/_sharding.py``);
 * the cost of the step size that the wheel dynamics need (2.5 ms vs 5 ms).
 
@@ -339,7 +339,7 @@ def main(argv=None) -> dict:
             "devices": jax.device_count(),
             "device": f"{jax.devices()[0].platform}:{jax.devices()[0].device_kind}",
             "default_devices_note": "the main figures use the calling environment's devices "
-            "(one CPU device unless VDSBI_CPU_DEVICES=auto or N)",
+            "(one CPU device per core unless VDSBI_CPU_DEVICES=N)",
         },
         "loadavg_start": list(load_start),
         "loadavg_end": list(load_end),

@@ -98,6 +98,12 @@ def test_data_parallel_step_on_four_devices():
             np.testing.assert_allclose(v4, v1, rtol=1e-5)
             for a, b in zip(jax.tree.leaves(f4), jax.tree.leaves(f1)):
                 np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-4, atol=1e-6)
+        # An observation that spans several devices (as one simulated under sharding does)
+        # meets a flow placed on one device: the posterior takes it through the host.
+        x_all = replicate(jnp.asarray(x[0]), data_mesh(jax.devices()))
+        assert len(x_all.sharding.device_set) == 4 and len(jax.tree.leaves(f1)[0].sharding.device_set) == 1
+        one = np.asarray(Posterior(f1, x_all).sample(jax.random.key(4), 8))
+        np.testing.assert_array_equal(one, np.asarray(Posterior(f1, x[0]).sample(jax.random.key(4), 8)))
         print("OK", TRACE_COUNTS["train_step"])
         """,
         {

@@ -1,5 +1,5 @@
-"""VDSBI_CPU_DEVICES (off by default) asks JAX for CPU devices at import, only when nobody chose
-and JAX has not started. Each case runs in a fresh interpreter."""
+"""vdsbi asks JAX for CPU devices at import (one per core unless VDSBI_CPU_DEVICES says
+otherwise), only when nobody chose and JAX has not started. Each case runs in a fresh interpreter."""
 
 import os
 import subprocess
@@ -24,9 +24,10 @@ def _devices(before="", **env):
     return int(proc.stdout.split()[-1])
 
 
-def test_default_is_jaxs_one_device_and_auto_is_one_per_core():
-    assert _devices() == 1
-    assert _devices(VDSBI_CPU_DEVICES="auto") == max(1, min(len(os.sched_getaffinity(0)), 8))
+def test_default_and_auto_are_one_device_per_core():
+    per_core = max(1, min(len(os.sched_getaffinity(0)), 8))
+    assert _devices() == per_core
+    assert _devices(VDSBI_CPU_DEVICES="auto") == per_core
 
 
 def test_environment_variable_sizes_or_turns_it_off():

@@ -57,9 +57,14 @@ class Posterior(eqx.Module):
         return self.flow.prior
 
     def _x(self, x):
-        x = self.x_o if x is None else jnp.asarray(x)
+        x = self.x_o if x is None else x
         if x is None:
             raise ValueError("No observation: pass x= or build the Posterior with x_o.")
+        if isinstance(x, jax.Array) and not isinstance(x, jax.core.Tracer) and len(x.sharding.device_set) > 1:
+            # Through the host: an observation simulated under sharding lives on several
+            # devices, the flow's parameters on one.
+            x = np.asarray(x)
+        x = jnp.asarray(x)
         if tuple(x.shape) != self.flow.x_shape:
             raise ValueError(f"x has shape {tuple(x.shape)}, the estimator expects {self.flow.x_shape}")
         return x

@@ -1,13 +1,14 @@
 """Draws along a leading batch axis, split evenly over all JAX devices.
 
 On a CPU, JAX gives one device by default and XLA runs a vmapped simulation on one core, so a
-batch of draws leaves the other cores idle. With ``VDSBI_CPU_DEVICES=auto`` (one per core, at
-most ``MAX_CPU_DEVICES``) or ``=N``, vdsbi asks JAX for that many CPU devices through JAX's own
-option ``jax_num_cpu_devices`` when this module is imported before JAX has started, and
-batches of draws are split over them (5000 draws × 5 s: 1.63 s → 0.84 s on 2 cores). It is
-OFF by default (unset = ``1``): measured on 2 cores, a process with two CPU devices trained
-the flow 1.5–6× slower per step even on one device, and training dominates identification.
-The setting is skipped if the user already chose (``jax_num_cpu_devices`` set, or
+batch of draws would leave the other cores idle. When this module is imported before JAX has
+started, vdsbi asks JAX for one CPU device per core (at most ``MAX_CPU_DEVICES``) through JAX's
+own option ``jax_num_cpu_devices``, and batches of draws are split over them (5000 draws × 5 s:
+1.12 s on one device, 0.59 s on two; ``benchmarks/simulator.py``). ``VDSBI_CPU_DEVICES=N`` sizes
+it and ``=1`` turns it off. Training keeps to the first CPU device (see
+`vdsbi.inference.data_mesh`), and with JAX 0.10 a process with two CPU devices trains as fast
+as one with one (s23: the same s per epoch in `experiments/paper_table2.py`). The setting is
+skipped if the user already chose (``jax_num_cpu_devices`` set, or
 ``--xla_force_host_platform_device_count`` in ``XLA_FLAGS``) or JAX already ran something.
 """
 
@@ -43,9 +44,9 @@ ENV_CPU_DEVICES = "VDSBI_CPU_DEVICES"
 
 
 def cpu_devices_wanted(env: dict | None = None) -> int:
-    """CPU devices vdsbi asks JAX for: ``VDSBI_CPU_DEVICES`` (unset: 1; ``auto``: one per core)."""
+    """CPU devices vdsbi asks JAX for: ``VDSBI_CPU_DEVICES`` (unset or ``auto``: one per core)."""
     env = os.environ if env is None else env
-    raw = env.get(ENV_CPU_DEVICES, "1").strip().lower() or "1"
+    raw = env.get(ENV_CPU_DEVICES, "auto").strip().lower() or "auto"
     if raw == "auto":
         return max(1, min(len(os.sched_getaffinity(0)), MAX_CPU_DEVICES))
     try:
