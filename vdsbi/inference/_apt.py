@@ -7,7 +7,6 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, PRNGKeyArray
 
@@ -17,7 +16,7 @@ from ._config import NPEConfig
 from ._embeddings import AbstractEmbedding
 from ._flow import ConditionalFlow
 from ._loss import AtomicLoss
-from ._posterior import Posterior, _sample
+from ._posterior import Posterior, _sample, on_one_device
 from ._prior import BoxPrior
 from ._sharding import data_mesh
 from ._train import fit
@@ -76,9 +75,7 @@ def apt(
     Returns:
         ``(posterior at x_o, final state)``.
     """
-    # Through the host: an observation simulated under sharding lives on several devices,
-    # and the flow's parameters on one.
-    x_o = jnp.asarray(np.asarray(x_o))
+    x_o = on_one_device(x_o)
     sims = _sims_schedule(sims_per_round, rounds)
     if config.estimator == "fmpe" and rounds > 1 and not truncate:
         raise ValueError("estimator='fmpe' has no atomic (APT) loss: use rounds=1 or truncate=True")

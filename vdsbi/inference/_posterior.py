@@ -12,6 +12,14 @@ from ._prior import BoxPrior
 from ._serialise import FORMAT_VERSION, flow_from_bytes, flow_to_bytes, read_npz, write_npz
 
 
+def on_one_device(x):
+    """An observation as one array on one device. A concrete array goes through the host: one
+    simulated under sharding lives on several devices, the flow's parameters on one."""
+    if isinstance(x, jax.core.Tracer):
+        return x
+    return jnp.asarray(np.asarray(x))
+
+
 @eqx.filter_jit
 def _sample(flow, key, x, n):
     return flow.sample(key, x, n)
@@ -60,11 +68,7 @@ class Posterior(eqx.Module):
         x = self.x_o if x is None else x
         if x is None:
             raise ValueError("No observation: pass x= or build the Posterior with x_o.")
-        if isinstance(x, jax.Array) and not isinstance(x, jax.core.Tracer) and len(x.sharding.device_set) > 1:
-            # Through the host: an observation simulated under sharding lives on several
-            # devices, the flow's parameters on one.
-            x = np.asarray(x)
-        x = jnp.asarray(x)
+        x = on_one_device(x)
         if tuple(x.shape) != self.flow.x_shape:
             raise ValueError(f"x has shape {tuple(x.shape)}, the estimator expects {self.flow.x_shape}")
         return x
