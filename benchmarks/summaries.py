@@ -77,9 +77,6 @@ def main(argv=None):
     ap.add_argument("--ensemble", type=int, default=None)
     ap.add_argument("--theta-map", choices=("logit", "affine"), default=None)
     ap.add_argument("--tail-bound", type=float, default=None, help="spline interval [-B, B] of the flow")
-    ap.add_argument(
-        "--conditional-affine", action="store_true", default=None, help="NPEConfig.conditional_affine=True"
-    )
     ap.add_argument("--tag", default="", help="suffix for the output files")
     args = ap.parse_args(argv)
     n_sims = args.sims or (400 if args.quick else 5000)
@@ -115,7 +112,6 @@ def main(argv=None):
         "ensemble": args.ensemble,
         "theta_map": args.theta_map,
         "tail_bound": args.tail_bound,
-        "conditional_affine": args.conditional_affine,
     }
     overrides = {k: v for k, v in overrides.items() if v is not None}
     configs = {  # each embedding's IdentifySettings default, with the overrides

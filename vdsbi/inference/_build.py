@@ -69,7 +69,6 @@ def _make(key, prior, embedding, x_shape, config, theta_standardizer, x_standard
         use_lu=config.use_lu,
         context_gating=config.context_gating,
         theta_map=config.theta_map,
-        conditional_affine=config.conditional_affine,
         theta_standardizer=theta_standardizer,
         x_standardizer=x_standardizer,
     )

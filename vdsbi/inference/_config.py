@@ -19,8 +19,6 @@ class NPEConfig:
             ``"affine"`` (on θ itself, as sbi; density cut at the box without renormalising,
             samples by rejection). See `ConditionalFlow`.
         use_lu: learned LU-linear layer after each coupling layer.
-        conditional_affine: before the coupling layers, standardise θ per observation with a
-            location and scale that an MLP computes from the context (see `ConditionalFlow`).
         context_gating: the context also gates every residual block of the conditioners
             (nflows' ``ResidualNet``, as in sbi's NSF); off by default.
         batch_size: training batch size (rounded down to a multiple of the device count).
@@ -84,7 +82,6 @@ class NPEConfig:
     tail_bound: float = 3.0
     use_lu: bool = True
     context_gating: bool = False
-    conditional_affine: bool = False
     theta_map: Literal["logit", "affine"] = "logit"
     batch_size: int = 128
     learning_rate: float = 5e-4

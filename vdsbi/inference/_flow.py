@@ -2,11 +2,9 @@
 
 Density of θ given x, for ONE θ and ONE x (vmap outside):
 
-    θ ∈ box --logit--> z --standardise--> z' [--(z' - μ(c))/σ(c)-->]
-            --[coupling RQ-spline, LU-linear] × L--> ε ~ N(0, I)
+    θ ∈ box --logit--> z --standardise--> z' --[coupling RQ-spline, LU-linear] × L--> ε ~ N(0, I)
 
-conditioned on ``c = embedding(standardise(x))``; the bracketed step (``conditional_affine``) is
-optional. With ``theta_map="logit"`` (default) the box
+conditioned on ``c = embedding(standardise(x))``. With ``theta_map="logit"`` (default) the box
 map is a fixed bijection, so the density is zero outside the prior box and samples always lie
 inside it. With ``theta_map="affine"`` (as sbi) z = θ: the flow lives on R^d, its density is set
 to zero outside the box WITHOUT renormalising (the mass leaking out is lost; ratios at one x,
@@ -82,29 +80,6 @@ class _ResidualNet(eqx.Module):
 
     def __call__(self, h):
         return self.last(self.features(h))
-
-
-class _ContextAffine(eqx.Module):
-    """Elementwise ``u = (z - μ(c)) / σ(c)`` with ``(μ, log σ)`` an MLP of the context alone.
-
-    It moves each posterior to the spline interval's centre at its own scale before the coupling
-    layers, which then model only its shape: a posterior far narrower than the prior (a tenth
-    of the box, as on sbibm's gaussian_linear_uniform) otherwise has to be shifted and squeezed
-    by splines whose ends are pinned at ``±tail_bound``. Initialised to the identity.
-    """
-
-    net: eqx.nn.MLP
-
-    def __init__(self, context_dim: int, dim: int, hidden: int, *, key: PRNGKeyArray):
-        net = eqx.nn.MLP(context_dim, 2 * dim, hidden, depth=2, activation=jax.nn.relu, key=key)
-        last = net.layers[-1]
-        zero = (last.weight * 0.0, last.bias * 0.0)
-        self.net = eqx.tree_at(lambda n: (n.layers[-1].weight, n.layers[-1].bias), net, zero)
-
-    def __call__(self, context: Float[Array, " c"]) -> tuple[Float[Array, " d"], Float[Array, " d"]]:
-        """``(μ, log σ)``; log σ soft-clipped to ±5 so a bad step cannot overflow ``exp``."""
-        shift, raw = jnp.split(self.net(context), 2)
-        return shift, 5.0 * jnp.tanh(raw / 5.0)
 
 
 class _Layer(eqx.Module):
@@ -217,8 +192,6 @@ class ConditionalFlow(eqx.Module):
         num_layers, num_bins, hidden, num_blocks, tail_bound, use_lu: architecture.
         context_gating: the context also gates every residual block of the conditioners
             (as nflows/sbi's NSF); default False (context through the first layer only).
-        conditional_affine: first standardise z' per observation, ``(z' - μ(c)) / σ(c)`` with
-            ``μ, σ`` from the context (`_ContextAffine`); default False.
         theta_standardizer: affine map in the unbounded (logit, or θ) space, shape ``(d,)``.
         theta_map: ``"logit"`` (box → R^d bijection) or ``"affine"`` (flow on θ itself; sbi's
             choice: a thin curved posterior is not bent further by the logit). two_moons at
@@ -227,7 +200,6 @@ class ConditionalFlow(eqx.Module):
     """
 
     layers: _Layer  # stacked along a leading layer axis
-    context_affine: _ContextAffine | None
     embedding: AbstractEmbedding
     prior: BoxPrior
     theta_standardizer: Standardizer
@@ -242,7 +214,6 @@ class ConditionalFlow(eqx.Module):
     use_lu: bool = eqx.field(static=True)
     context_gating: bool = eqx.field(static=True)
     theta_map: str = eqx.field(static=True)
-    conditional_affine: bool = eqx.field(static=True)
 
     def __init__(
         self,
@@ -259,7 +230,6 @@ class ConditionalFlow(eqx.Module):
         use_lu: bool = True,
         context_gating: bool = False,
         theta_map: str = "logit",
-        conditional_affine: bool = False,
         theta_standardizer: Standardizer | None = None,
         x_standardizer: Standardizer | None = None,
     ):
@@ -287,14 +257,6 @@ class ConditionalFlow(eqx.Module):
         keys = jax.random.split(key, self.num_layers)
         masks = _masks(self.num_layers, self.dim)
         self.layers = eqx.filter_vmap(lambda k, m: _Layer(m, embedding.out_dim, key=k, **kw))(keys, masks)
-        self.conditional_affine = bool(conditional_affine)
-        # its own key (folded in), so the layers' weights do not depend on the option
-        k_aff = jax.random.fold_in(key, 7)
-        self.context_affine = (
-            _ContextAffine(embedding.out_dim, self.dim, self.hidden, key=k_aff)
-            if conditional_affine
-            else None
-        )
 
     # ---- one example -------------------------------------------------------------------------
     def context(self, x: Float[Array, "..."]) -> Float[Array, " c"]:
@@ -302,10 +264,6 @@ class ConditionalFlow(eqx.Module):
         return self.embedding(self.x_standardizer(x))
 
     def _to_noise(self, zs, context):
-        ld0 = jnp.zeros((), zs.dtype)
-        if self.context_affine is not None:
-            shift, log_scale = self.context_affine(context)
-            zs, ld0 = (zs - shift) * jnp.exp(-log_scale), -jnp.sum(log_scale)
         params, static = eqx.partition(self.layers, eqx.is_array)
 
         def body(carry, p):
@@ -313,7 +271,7 @@ class ConditionalFlow(eqx.Module):
             z, l = eqx.combine(p, static).forward(z, context)
             return (z, ld + l), None
 
-        (eps, logdet), _ = jax.lax.scan(body, (zs, ld0), params)
+        (eps, logdet), _ = jax.lax.scan(body, (zs, jnp.zeros((), zs.dtype)), params)
         return eps, logdet
 
     def _from_noise(self, eps, context):
@@ -325,9 +283,6 @@ class ConditionalFlow(eqx.Module):
             return (y, ld + l), None
 
         (zs, logdet), _ = jax.lax.scan(body, (eps, jnp.zeros((), eps.dtype)), params, reverse=True)
-        if self.context_affine is not None:
-            shift, log_scale = self.context_affine(context)
-            zs, logdet = zs * jnp.exp(log_scale) + shift, logdet + jnp.sum(log_scale)
         return zs, logdet
 
     def log_prob_context(self, theta: Float[Array, " d"], context: Float[Array, " c"]) -> Float[Array, ""]:
@@ -379,7 +334,6 @@ class ConditionalFlow(eqx.Module):
             "use_lu": self.use_lu,
             "context_gating": self.context_gating,
             "theta_map": self.theta_map,
-            "conditional_affine": self.conditional_affine,
             "embedding": [type(self.embedding).__name__, self.embedding.spec()],
         }
 
@@ -506,7 +460,6 @@ def _flow_from_spec(spec: dict[str, Any], key: PRNGKeyArray) -> ConditionalFlow:
         use_lu=spec["use_lu"],
         context_gating=spec.get("context_gating", False),  # absent in files written before it
         theta_map=spec.get("theta_map", "logit"),
-        conditional_affine=spec.get("conditional_affine", False),
         x_standardizer=xstd,
     )
 
