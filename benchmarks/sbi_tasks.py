@@ -167,6 +167,16 @@ def train_posterior(task, method, budget, cfg, key, x_o, obs_id=None):
     from ``key``), APT/TSNPE for observation ``obs_id`` (10 rounds of budget/10, ``key`` folded
     with ``obs_id``)."""
     seq = method in SEQUENTIAL
+
+    def progress(state):  # a 10⁵ observation runs 10-45 min here: say where it is
+        h = state.history[-1]
+        where = f"obs {obs_id} " if seq else ""
+        print(
+            f"    {task.name} {method} {budget} {where}round {state.round}/{10 if seq else 1}: "
+            f"{h['epochs']} epochs (best {h['best_epoch']}), {h['train_s']:.0f} s",
+            flush=True,
+        )
+
     return apt(
         jax.random.fold_in(key, obs_id) if seq else key,
         task.simulate,
@@ -177,6 +187,7 @@ def train_posterior(task, method, budget, cfg, key, x_o, obs_id=None):
         sims_per_round=budget // 10 if seq else budget,
         config=cfg,
         truncate=method == "tsnpe",
+        on_round_end=progress,
     )
 
 
