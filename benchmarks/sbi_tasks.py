@@ -167,12 +167,13 @@ def train_posterior(task, method, budget, cfg, key, x_o, obs_id=None):
     from ``key``), APT/TSNPE for observation ``obs_id`` (10 rounds of budget/10, ``key`` folded
     with ``obs_id``)."""
     seq = method in SEQUENTIAL
+    rounds = 10 if seq else 1
 
     def progress(state):  # a 10⁵ observation runs 10-45 min here: say where it is
         h = state.history[-1]
         where = f"obs {obs_id} " if seq else ""
         print(
-            f"    {task.name} {method} {budget} {where}round {state.round}/{10 if seq else 1}: "
+            f"    {task.name} {method} {budget} {where}round {state.round}/{rounds}: "
             f"{h['epochs']} epochs (best {h['best_epoch']}), {h['train_s']:.0f} s",
             flush=True,
         )
@@ -183,7 +184,7 @@ def train_posterior(task, method, budget, cfg, key, x_o, obs_id=None):
         task.prior,
         x_o,
         embedding=IdentityEmbedding(task.dim_x),
-        rounds=10 if seq else 1,
+        rounds=rounds,
         sims_per_round=budget // 10 if seq else budget,
         config=cfg,
         truncate=method == "tsnpe",

@@ -13,11 +13,12 @@ from ._serialise import FORMAT_VERSION, flow_from_bytes, flow_to_bytes, read_npz
 
 
 def on_one_device(x):
-    """An observation as one array on one device. A concrete array goes through the host: one
-    simulated under sharding lives on several devices, the flow's parameters on one."""
-    if isinstance(x, jax.core.Tracer):
-        return x
-    return jnp.asarray(np.asarray(x))
+    """An observation as one array on one device. Only a concrete array spanning several devices
+    goes through the host (one simulated under sharding; the flow's parameters live on one):
+    the others stay where they are, so a Posterior called in a loop copies nothing."""
+    if isinstance(x, jax.Array) and not isinstance(x, jax.core.Tracer) and len(x.sharding.device_set) > 1:
+        x = np.asarray(x)
+    return jnp.asarray(x)
 
 
 @eqx.filter_jit
