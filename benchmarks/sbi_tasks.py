@@ -137,9 +137,10 @@ class _Observations:
 
 def _rounds(state):
     """Per round: epochs, best epoch, patience (epochs), wall seconds and, for TSNPE, how the
-    truncated prior was drawn (proposal, acceptance, draws filled in from the wider proposal)."""
+    truncated prior was drawn (proposal, acceptance, draws filled in from the wider proposal);
+    for APT, the proposal's mass inside the box (``box_mass``)."""
     keys = ("epochs", "best_epoch", "patience", "train_s")
-    extra = ("region_proposal", "acceptance", "num_filled")
+    extra = ("region_proposal", "acceptance", "num_filled", "box_mass")
     return [{k: h.get(k) for k in keys} | {k: h[k] for k in extra if k in h} for h in state.history]
 
 
@@ -174,7 +175,8 @@ def train_posterior(task, method, budget, cfg, key, x_o, obs_id=None):
         where = f"obs {obs_id} " if seq else ""
         print(
             f"    {task.name} {method} {budget} {where}round {state.round}/{rounds}: "
-            f"{h['epochs']} epochs (best {h['best_epoch']}), {h['train_s']:.0f} s",
+            f"{h['epochs']} epochs (best {h['best_epoch']}), {h['train_s']:.0f} s"
+            + (f", proposal {h['box_mass']:.1%} in the box" if "box_mass" in h else ""),
             flush=True,
         )
 

@@ -1,5 +1,6 @@
 import dataclasses
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -18,6 +19,7 @@ from vdsbi.inference import (
     atomic_apt_loss,
     build_flow,
     init_opt_state,
+    leak_penalty,
     load_state,
     make_optimizer,
     save_state,
@@ -87,6 +89,62 @@ def test_atomic_loss_module_matches_reference_kernel(getkey):
             mask if combined else None,
         )
         np.testing.assert_allclose(float(got), float(want), rtol=1e-5)
+
+
+def _as(dtype, tree):
+    return jax.tree_util.tree_map(
+        lambda a: a.astype(dtype) if jnp.issubdtype(a.dtype, jnp.floating) else a, tree
+    )
+
+
+def _shifted_affine_flow(getkey, shift):
+    """A TINY affine flow on the box [-1, 1]² whose draws sit ``shift`` to the right (some outside)."""
+    theta, x, _, _ = _tiny_problem(getkey, 64)
+    cfg = dataclasses.replace(TINY, theta_map="affine")
+    flow = build_flow(getkey(), BoxPrior(-jnp.ones(2), jnp.ones(2)), IdentityEmbedding(2), theta, x, cfg)
+    return eqx.tree_at(lambda f: f.theta_standardizer.mean, flow, flow.theta_standardizer.mean + shift), x
+
+
+def test_leak_penalty_is_the_squared_excess_of_the_flows_draws(getkey, x64):
+    flow, x = _shifted_affine_flow(getkey, jnp.array([0.8, 0.0]))
+    flow = _as(jnp.float64, flow)
+    key, ctx = getkey(), jax.vmap(flow.context)(jnp.asarray(x[:16], jnp.float64))
+    eps = jax.random.normal(key, (16, 2), dtype=jnp.float64)
+    draws = np.asarray(jax.vmap(flow.unmasked_draw)(eps, ctx))
+    inside = np.all(np.abs(draws) <= 1, axis=1)
+    assert 0 < np.mean(inside) < 1  # some draws leak, not all
+    mass = flow.box_mass(key, ctx[0], 16)  # the same base noise as draw 0's context's
+    eps0 = jax.random.normal(key, (16, 2), dtype=jnp.float64)
+    draws0 = np.asarray(jax.vmap(lambda e: flow.unmasked_draw(e, ctx[0]))(eps0))
+    assert float(mass) == np.mean(np.all(np.abs(draws0) <= 1, axis=1))
+    excess = (np.maximum(draws - 1, 0) + np.maximum(-1 - draws, 0)) / 2.0  # box width 2
+    np.testing.assert_allclose(float(leak_penalty(flow, key, ctx)), np.mean(np.sum(excess**2, 1)), rtol=1e-10)
+
+    # differentiable through the draws: d/d(shift) against central finite differences
+    def pen(s):
+        f = eqx.tree_at(lambda f: f.theta_standardizer.mean, flow, flow.theta_standardizer.mean + s)
+        return leak_penalty(f, key, ctx)
+
+    s0, h = jnp.zeros(2), 1e-6
+    grad = jax.grad(pen)(s0)
+    fd = [(pen(s0.at[j].add(h)) - pen(s0.at[j].add(-h))) / (2 * h) for j in range(2)]
+    np.testing.assert_allclose(np.asarray(grad), np.asarray(fd), rtol=1e-5, atol=1e-9)
+    assert grad[0] > 0  # moving the mass further right leaks more
+
+
+def test_leak_penalty_is_zero_for_the_logit_map_and_adds_to_the_atomic_loss(getkey):
+    theta, x, flow, _ = _tiny_problem(getkey, 32)  # TINY: theta_map="logit", draws always inside
+    ctx = jax.vmap(flow.context)(jnp.asarray(x))
+    assert float(leak_penalty(flow, getkey(), ctx)) == 0.0
+    assert float(flow.box_mass(getkey(), ctx[0], 100)) == 1.0
+    affine, _ = _shifted_affine_flow(getkey, jnp.array([0.8, 0.0]))
+    key, mask = getkey(), np.zeros(32, bool)
+    k_atoms, k_leak = jax.random.split(key)
+    plain = AtomicLoss(num_atoms=5)(affine, theta, x, mask, k_atoms)
+    pen = leak_penalty(affine, k_leak, jax.vmap(affine.context)(jnp.asarray(x)))
+    got = AtomicLoss(num_atoms=5, leak_weight=3.0)(affine, theta, x, mask, key)
+    assert float(pen) > 0
+    np.testing.assert_allclose(float(got), float(plain + 3.0 * pen), rtol=1e-5)
 
 
 def _tiny_problem(getkey, n):
@@ -206,6 +264,7 @@ def test_resume_from_state_is_bit_identical(tmp_path, getkey):
     post_res, state_res = apt(jax.random.key(999), _gauss_sim, prior, x_o, rounds=2, state=saved, **kw)
 
     assert state_res.history[1]["loss"] == "AtomicLoss"
+    assert state_res.history[1]["box_mass"] == 1.0  # TINY's logit map keeps all mass in the box
     np.testing.assert_array_equal(state_res.theta, state_full.theta)
     np.testing.assert_array_equal(state_res.x, state_full.x)
     assert tree_allclose(post_res.flow, post_full.flow, rtol=0, atol=0)
@@ -321,6 +380,8 @@ def test_new_config_fields_are_checked():
         NPEConfig(ensemble=0)
     with pytest.raises(ValueError, match="average_epochs"):
         NPEConfig(average_epochs=-1.0)
+    with pytest.raises(ValueError, match="leak_weight"):
+        NPEConfig(leak_weight=-0.1)
 
 
 def test_ensemble_members_are_trained_independently_at_once(getkey):

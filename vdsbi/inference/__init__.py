@@ -30,6 +30,7 @@ from ._loss import (
     MaximumLikelihoodLoss as MaximumLikelihoodLoss,
     atom_indices as atom_indices,
     atomic_apt_loss as atomic_apt_loss,
+    leak_penalty as leak_penalty,
 )
 from ._npe import npe as npe
 from ._posterior import Posterior as Posterior

@@ -6,6 +6,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
+import equinox as eqx
 import jax
 import numpy as np
 from jaxtyping import Array, PRNGKeyArray
@@ -153,7 +154,19 @@ def _propose(
     if problem.truncate:
         theta, tinfo = truncated_prior(key, flow, problem.prior, problem.x_o, n, problem.config)
         return theta, {"proposal": "truncated_prior", **tinfo}
-    return _sample(flow, key, problem.x_o, n), {"proposal": "posterior"}
+    k_draw, k_mass = jax.random.split(key)
+    theta = _sample(flow, k_draw, problem.x_o, n)
+    # below 1/_MAX_REJECTION_ROUNDS of it inside the box, the proposal holds clipped draws
+    mass = float(_box_mass(flow, k_mass, problem.x_o, _BOX_MASS_DRAWS))
+    return theta, {"proposal": "posterior", "box_mass": mass}
+
+
+_BOX_MASS_DRAWS = 10_000
+
+
+@eqx.filter_jit
+def _box_mass(flow, key, x, n):
+    return flow.box_mass(key, flow.context(x), n)
 
 
 def _simulate_kept(
@@ -214,7 +227,9 @@ def _train_round(
     if r == 0 or problem.truncate:
         loss = first_round_loss(config)
     else:
-        loss = AtomicLoss(num_atoms=config.num_atoms, combined=config.combined_loss)
+        loss = AtomicLoss(
+            num_atoms=config.num_atoms, combined=config.combined_loss, leak_weight=config.leak_weight
+        )
     flow, finfo = fit(
         k_train,
         flow,

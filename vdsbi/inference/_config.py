@@ -55,6 +55,10 @@ class NPEConfig:
             ran the sbibm tasks at 10⁴ 1.5-2.7x faster but worse on 14 of 16 observations
             (``benchmarks/results/apt_atoms/``), so the default stays sbi's 10.
         combined_loss: add maximum likelihood on prior draws to the atomic loss.
+        leak_weight: weight of `leak_penalty` (one draw per example, the squared distance
+            outside the box in box widths) added to the atomic loss; matters only for
+            ``theta_map="affine"``, whose mass outside the box the atomic loss cannot see.
+            0 (default): off.
         x_standardize: ``"channel"`` (statistics over all axes but the last), ``"global"``,
             ``"trajectory"`` (minus the mean trajectory, per-channel scale; see `Standardizer.fit`)
             or ``"none"``.
@@ -97,6 +101,7 @@ class NPEConfig:
     validation_fraction: float = 0.1
     num_atoms: int = 10
     combined_loss: bool = False
+    leak_weight: float = 0.0
     x_standardize: str = "channel"
     truncation_epsilon: float = 1e-4
     truncation_samples: int = 10_000
@@ -134,6 +139,8 @@ class NPEConfig:
             raise ValueError(f"ensemble must be >= 1, got {self.ensemble}")
         if self.truncation_widen < 1.0:
             raise ValueError(f"truncation_widen must be >= 1, got {self.truncation_widen}")
+        if self.leak_weight < 0:
+            raise ValueError(f"leak_weight must be >= 0, got {self.leak_weight}")
         if self.num_atoms < 2:
             raise ValueError("num_atoms must be >= 2")
 

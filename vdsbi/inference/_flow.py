@@ -303,14 +303,28 @@ class ConditionalFlow(eqx.Module):
         """``log q(θ | x)`` for ONE θ and ONE x."""
         return self.log_prob_context(theta, self.context(x))
 
+    def unmasked_draw(self, eps: Float[Array, " d"], context: Float[Array, " c"]) -> Float[Array, " d"]:
+        """The flow's draw for ONE base-noise vector, before any box constraint: always inside
+        the box with ``theta_map="logit"``; with ``"affine"`` possibly outside it (a leak).
+        Differentiable in the flow's parameters (reparameterised)."""
+        zs, _ = self._from_noise(eps, context)
+        z = self.theta_standardizer.inverse(zs)
+        return self.prior.from_unbounded(z) if self.theta_map == "logit" else z
+
+    def box_mass(self, key: PRNGKeyArray, context: Float[Array, " c"], n: int) -> Float[Array, ""]:
+        """Monte-Carlo share of the flow's mass inside the prior box, from ``n`` draws: 1 with
+        ``theta_map="logit"``; with ``"affine"``, the acceptance rate of `sample`'s rejection."""
+        eps = jax.random.normal(key, (n, self.dim), dtype=self.prior.low.dtype)
+        draws = jax.vmap(lambda e: self.unmasked_draw(e, context))(eps)
+        return jnp.mean(jnp.all((draws >= self.prior.low) & (draws <= self.prior.high), axis=1))
+
     def sample_context(self, key: PRNGKeyArray, context: Float[Array, " c"], n: int) -> Float[Array, "n d"]:
         def draw(k):
             eps = jax.random.normal(k, (n, self.dim), dtype=self.prior.low.dtype)
-            zs, _ = jax.vmap(lambda e: self._from_noise(e, context))(eps)
-            return jax.vmap(self.theta_standardizer.inverse)(zs)
+            return jax.vmap(lambda e: self.unmasked_draw(e, context))(eps)
 
         if self.theta_map == "logit":
-            return jax.vmap(self.prior.from_unbounded)(draw(key))
+            return draw(key)
         return _rejection(draw, self.prior, key, n)
 
     def sample(self, key: PRNGKeyArray, x: Float[Array, "..."], n: int) -> Float[Array, "n d"]:
@@ -421,6 +435,11 @@ class FlowEnsemble(eqx.Module):
 
     def sample(self, key: PRNGKeyArray, x: Float[Array, "..."], n: int) -> Float[Array, "n d"]:
         return self.sample_context(key, self.context(x), n)
+
+    def box_mass(self, key: PRNGKeyArray, context: Float[Array, "e c"], n: int) -> Float[Array, ""]:
+        """The mixture's share of mass inside the box: the members' mean (``n`` draws each)."""
+        keys = jax.random.split(key, self.size)
+        return jnp.mean(eqx.filter_vmap(lambda m, c, k: m.box_mass(k, c, n))(self.members, context, keys))
 
     def spec(self) -> dict[str, Any]:
         return {**self.member(0).spec(), "ensemble": self.size}

@@ -76,15 +76,34 @@ class MaximumLikelihoodLoss(AbstractLoss):
         return -jnp.mean(jax.vmap(flow.log_prob)(theta, x))
 
 
+def leak_penalty(flow, key: PRNGKeyArray, contexts: Float[Array, "batch c"]) -> Float[Array, ""]:
+    """Mean squared distance outside the prior box, in box widths, of one reparameterised draw
+    of ``q(θ | x_i)`` per context: 0 iff (almost) all of the flow's mass lies in the box.
+
+    The atomic loss compares densities only at atoms inside the box, so it cannot see mass the
+    flow puts outside (``theta_map="affine"``): that mass drifts freely, and where the posterior
+    rests against the box edge it ran to 99 % (slcp observation 7, 10⁴). The penalty selects,
+    among flows equal under the atomic loss, those that keep their mass in the box.
+    """
+    eps = jax.random.normal(key, (contexts.shape[0], flow.dim), dtype=flow.prior.low.dtype)
+    draws = jax.vmap(flow.unmasked_draw)(eps, contexts)
+    width = flow.prior.high - flow.prior.low
+    excess = (jax.nn.relu(draws - flow.prior.high) + jax.nn.relu(flow.prior.low - draws)) / width
+    return jnp.mean(jnp.sum(excess**2, axis=-1))
+
+
 class AtomicLoss(AbstractLoss):
-    """APT / SNPE-C atomic loss with ``num_atoms`` atoms drawn from the batch."""
+    """APT / SNPE-C atomic loss with ``num_atoms`` atoms drawn from the batch, plus
+    ``leak_weight`` times `leak_penalty` (0: off)."""
 
     num_atoms: int = eqx.field(static=True, default=10)
     combined: bool = eqx.field(static=True, default=False)
+    leak_weight: float = eqx.field(static=True, default=0.0)
 
     def __call__(self, flow, theta, x, prior_mask, key):
         b = theta.shape[0]
         k = min(self.num_atoms, b)
+        key, k_leak = jax.random.split(key) if self.leak_weight > 0 else (key, None)
         atom_theta = theta[atom_indices(key, b, k)]  # (B, K, d)
         contexts = jax.vmap(flow.context)(x)
         # One flat vmap over the B·K (θ, context) pairs with each context broadcast, not
@@ -95,4 +114,7 @@ class AtomicLoss(AbstractLoss):
             atom_theta.reshape(b * k, -1), pair_ctx.reshape(b * k, -1)
         ).reshape(b, k)
         lp = jax.vmap(jax.vmap(flow.prior.log_prob))(atom_theta)
-        return _atomic_from_log_probs(lq, lp, prior_mask if self.combined else None)
+        loss = _atomic_from_log_probs(lq, lp, prior_mask if self.combined else None)
+        if self.leak_weight > 0:
+            loss = loss + self.leak_weight * leak_penalty(flow, k_leak, contexts)
+        return loss
