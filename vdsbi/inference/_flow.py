@@ -358,8 +358,11 @@ _MAX_REJECTION_ROUNDS = 100
 def _rejection(draw: Callable, prior: BoxPrior, key: PRNGKeyArray, n: int) -> Float[Array, "n d"]:
     """``n`` draws of ``draw(key) -> (n, d)`` inside the box, in at most 100 rounds of ``n``.
 
-    Slots still empty after that (under 1 % of the mass inside the box) get a draw clipped to
-    the box, so the result always lies in it.
+    Slots still empty after that (under 1 % of the mass inside the box) repeat the accepted
+    draws in turn: repeated draws of the right density, where clipping new ones to the box (as
+    before s25) piled them on its faces. APT's flow on slcp's observation 7 (10⁴ simulations)
+    kept 0.6 % of its mass in the box: 10⁴ draws would need 170 rounds. Only if none was
+    accepted are they clipped, so the result always lies in the box.
     """
     low, high = prior.low, prior.high
 
@@ -378,8 +381,12 @@ def _rejection(draw: Callable, prior: BoxPrior, key: PRNGKeyArray, n: int) -> Fl
 
     init = (jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), jnp.zeros((n, prior.dim), low.dtype))
     _, count, out = jax.lax.while_loop(cond, body, init)
-    fill = jnp.clip(draw(jax.random.fold_in(key, _MAX_REJECTION_ROUNDS)), low, high)
-    return jnp.where((jnp.arange(n) < count)[:, None], out, fill)
+    slots = jnp.arange(n)
+    repeat = out[slots % jnp.maximum(count, 1)]
+    fill = jnp.where(
+        count > 0, repeat, jnp.clip(draw(jax.random.fold_in(key, _MAX_REJECTION_ROUNDS)), low, high)
+    )
+    return jnp.where((slots < count)[:, None], out, fill)
 
 
 class FlowEnsemble(eqx.Module):
