@@ -12,12 +12,12 @@ from ._embeddings import (
     embedding_from_spec as embedding_from_spec,
     register_embedding as register_embedding,
 )
-from ._flow import (
-    ConditionalFlow as ConditionalFlow,
+from ._ensemble import (
     FlowEnsemble as FlowEnsemble,
     flow_from_spec as flow_from_spec,
     trainable_filter as trainable_filter,
 )
+from ._flow import ConditionalFlow as ConditionalFlow
 from ._flow_matching import (
     FlowMatchingEstimator as FlowMatchingEstimator,
     FlowMatchingLoss as FlowMatchingLoss,

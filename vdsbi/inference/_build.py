@@ -11,7 +11,8 @@ from jaxtyping import PRNGKeyArray
 
 from ._config import NPEConfig
 from ._embeddings import AbstractEmbedding
-from ._flow import ConditionalFlow, FlowEnsemble
+from ._ensemble import FlowEnsemble
+from ._flow import ConditionalFlow
 from ._flow_matching import FlowMatchingEstimator, FlowMatchingLoss
 from ._loss import MaximumLikelihoodLoss
 from ._prior import BoxPrior

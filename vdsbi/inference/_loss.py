@@ -85,6 +85,8 @@ def leak_penalty(flow, key: PRNGKeyArray, contexts: Float[Array, "batch c"]) -> 
     rests against the box edge it ran to 99 % (slcp observation 7, 10⁴). The penalty selects,
     among flows equal under the atomic loss, those that keep their mass in the box.
     """
+    if flow.theta_map == "logit":  # the box map keeps every draw inside: nothing to draw
+        return jnp.zeros((), flow.prior.low.dtype)
     eps = jax.random.normal(key, (contexts.shape[0], flow.dim), dtype=flow.prior.low.dtype)
     draws = jax.vmap(flow.unmasked_draw)(eps, contexts)
     width = flow.prior.high - flow.prior.low

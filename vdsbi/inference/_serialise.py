@@ -9,7 +9,8 @@ from typing import Any
 import equinox as eqx
 import numpy as np
 
-from ._flow import ConditionalFlow, flow_from_spec
+from ._ensemble import flow_from_spec
+from ._flow import ConditionalFlow
 from ._flow_matching import fmpe_from_spec
 
 FORMAT_VERSION = 1

@@ -13,7 +13,8 @@ import numpy as np
 import optax
 from jaxtyping import PRNGKeyArray
 
-from ._flow import ConditionalFlow, member_mean, trainable_filter
+from ._ensemble import member_mean, trainable_filter
+from ._flow import ConditionalFlow
 from ._loss import AbstractLoss
 from ._sharding import data_mesh, replicate, stack_batches
 
