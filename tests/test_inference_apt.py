@@ -145,6 +145,12 @@ def test_leak_penalty_is_zero_for_the_logit_map_and_adds_to_the_atomic_loss(getk
     got = AtomicLoss(num_atoms=5, leak_weight=3.0)(affine, theta, x, mask, key)
     assert float(pen) > 0
     np.testing.assert_allclose(float(got), float(plain + 3.0 * pen), rtol=1e-5)
+    # on 8 of the 32 rows: every 4th, so every device's shard gives its share
+    ctx8 = jax.vmap(affine.context)(jnp.asarray(x[::4]))
+    pen8 = leak_penalty(affine, k_leak, ctx8)
+    got8 = AtomicLoss(num_atoms=5, leak_weight=3.0, leak_rows=8)(affine, theta, x, mask, key)
+    np.testing.assert_allclose(float(got8), float(plain + 3.0 * pen8), rtol=1e-5)
+    assert float(pen8) != float(pen)  # not vacuous: another set of draws
 
 
 def _tiny_problem(getkey, n):
@@ -382,6 +388,8 @@ def test_new_config_fields_are_checked():
         NPEConfig(average_epochs=-1.0)
     with pytest.raises(ValueError, match="leak_weight"):
         NPEConfig(leak_weight=-0.1)
+    with pytest.raises(ValueError, match="leak_rows"):
+        NPEConfig(leak_rows=-1)
 
 
 def test_ensemble_members_are_trained_independently_at_once(getkey):

@@ -1,7 +1,10 @@
+import warnings
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from vdsbi.inference import (
     BoxPrior,
@@ -201,7 +204,10 @@ def test_affine_theta_map_cuts_the_density_at_the_box_and_samples_inside(getkey,
     assert 0.2 < inside < 0.8  # not vacuous: the cut matters
     mass, _ = _grid_mass(post, (-1.0, 0.0), (2.0, 1.5))
     assert abs(mass - inside) < 5e-3, (mass, inside)
-    s = np.asarray(post.sample(getkey(), 20_000))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # enough mass in the box: no warning
+        s = np.asarray(post.sample(getkey(), 20_000))
+        jax.effects_barrier()
     assert np.all(s >= np.asarray(prior.low)) and np.all(s <= np.asarray(prior.high))
     np.testing.assert_allclose(
         s.mean(0),
@@ -212,7 +218,9 @@ def test_affine_theta_map_cuts_the_density_at_the_box_and_samples_inside(getkey,
     far = eqx.tree_at(
         lambda f: f.theta_standardizer, flow, Standardizer(mean=jnp.array([30.0, 30.0]), std=std.std)
     )
-    s = np.asarray(Posterior(far, x).sample(getkey(), 1000))
+    with pytest.warns(RuntimeWarning, match="only 0 of 1000"):
+        s = np.asarray(Posterior(far, x).sample(getkey(), 1000))
+        jax.effects_barrier()
     assert np.all(s >= np.asarray(prior.low)) and np.all(s <= np.asarray(prior.high))
     # about 0.3 % inside, under the 1 % that 100 rounds of rejection fill: the slots left over
     # repeat accepted draws instead of piling clipped ones on the box's faces
@@ -220,7 +228,9 @@ def test_affine_theta_map_cuts_the_density_at_the_box_and_samples_inside(getkey,
         lambda f: f.theta_standardizer, flow, Standardizer(mean=jnp.array([0.5, 3.5]), std=std.std)
     )
     assert 1e-3 < float(thin.box_mass(getkey(), thin.context(x), 200_000)) < 1e-2
-    s = np.asarray(Posterior(thin, x).sample(getkey(), 20_000))
+    with pytest.warns(RuntimeWarning, match="leaked out of the box"):
+        s = np.asarray(Posterior(thin, x).sample(getkey(), 20_000))
+        jax.effects_barrier()
     assert np.all((s > np.asarray(prior.low)) & (s < np.asarray(prior.high)))  # none on a face
     distinct = np.unique(s, axis=0)
     assert 20 < len(distinct) < 20_000  # some accepted (~0.3 % of 2·10⁶ tries), all repeated

@@ -228,7 +228,10 @@ def _train_round(
         loss = first_round_loss(config)
     else:
         loss = AtomicLoss(
-            num_atoms=config.num_atoms, combined=config.combined_loss, leak_weight=config.leak_weight
+            num_atoms=config.num_atoms,
+            combined=config.combined_loss,
+            leak_weight=config.leak_weight,
+            leak_rows=config.leak_rows,
         )
     flow, finfo = fit(
         k_train,

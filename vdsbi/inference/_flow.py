@@ -13,6 +13,7 @@ Layers are stacked with ``eqx.filter_vmap`` and applied with ``lax.scan``.
 """
 
 import math
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -382,9 +383,25 @@ def _rejection(draw: Callable, prior: BoxPrior, key: PRNGKeyArray, n: int) -> Fl
 
     init = (jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), jnp.zeros((n, prior.dim), low.dtype))
     _, count, out = jax.lax.while_loop(cond, body, init)
+    jax.debug.callback(lambda c: _warn_if_short(c, n), count)
     slots = jnp.arange(n)
     repeat = out[slots % jnp.maximum(count, 1)]
     fill = jnp.where(
         count > 0, repeat, jnp.clip(draw(jax.random.fold_in(key, _MAX_REJECTION_ROUNDS)), low, high)
     )
     return jnp.where((slots < count)[:, None], out, fill)
+
+
+def _warn_if_short(count, n) -> None:
+    """Host side of `_rejection`: say so when draws had to be repeated (a posterior that left
+    the box goes unnoticed otherwise: its draws look like any others)."""
+    short = int(jnp.min(count))  # vmapped over observations: the worst of them
+    if short < n:
+        warnings.warn(
+            f"only {short} of {n} posterior draws fell inside the prior box in "
+            f"{_MAX_REJECTION_ROUNDS} rounds of rejection (under 1 % of the flow's mass lies in "
+            "the box); the rest repeat them. The estimator has leaked out of the box: consider "
+            "theta_map='logit' or NPEConfig.leak_weight > 0.",
+            RuntimeWarning,
+            stacklevel=2,
+        )

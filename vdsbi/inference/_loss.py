@@ -94,13 +94,23 @@ def leak_penalty(flow, key: PRNGKeyArray, contexts: Float[Array, "batch c"]) -> 
     return jnp.mean(jnp.sum(excess**2, axis=-1))
 
 
+def leak_rows_of(contexts: Float[Array, "batch c"], rows: int) -> Float[Array, "m c"]:
+    """``rows`` evenly strided rows of a batch (0 or more than it has: all of them). The rows
+    of a batch are a random draw already, and a stride takes them from every device's shard."""
+    b = contexts.shape[0]
+    if rows <= 0 or rows >= b:
+        return contexts
+    return contexts[:: b // rows][:rows]
+
+
 class AtomicLoss(AbstractLoss):
     """APT / SNPE-C atomic loss with ``num_atoms`` atoms drawn from the batch, plus
-    ``leak_weight`` times `leak_penalty` (0: off)."""
+    ``leak_weight`` times `leak_penalty` (0: off) on ``leak_rows`` rows of it (0: all)."""
 
     num_atoms: int = eqx.field(static=True, default=10)
     combined: bool = eqx.field(static=True, default=False)
     leak_weight: float = eqx.field(static=True, default=0.0)
+    leak_rows: int = eqx.field(static=True, default=0)
 
     def __call__(self, flow, theta, x, prior_mask, key):
         b = theta.shape[0]
@@ -118,5 +128,6 @@ class AtomicLoss(AbstractLoss):
         lp = jax.vmap(jax.vmap(flow.prior.log_prob))(atom_theta)
         loss = _atomic_from_log_probs(lq, lp, prior_mask if self.combined else None)
         if self.leak_weight > 0:
-            loss = loss + self.leak_weight * leak_penalty(flow, k_leak, contexts)
+            pen = leak_penalty(flow, k_leak, leak_rows_of(contexts, self.leak_rows))
+            loss = loss + self.leak_weight * pen
         return loss
