@@ -12,10 +12,8 @@ import jax.numpy as jnp
 from jax.scipy.special import logsumexp
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from ._embeddings import embedding_from_spec
-from ._flow import ConditionalFlow
+from ._flow import ConditionalFlow, skeleton_parts
 from ._prior import BoxPrior
-from ._standardize import Standardizer
 
 
 class FlowEnsemble(eqx.Module):
@@ -98,15 +96,12 @@ def flow_from_spec(spec: dict[str, Any]) -> ConditionalFlow | FlowEnsemble:
 
 
 def _flow_from_spec(spec: dict[str, Any], key: PRNGKeyArray) -> ConditionalFlow:
-    prior = BoxPrior(jnp.asarray(spec["low"]), jnp.asarray(spec["high"]), spec["names"])
-    name, espec = spec["embedding"]
-    xs = tuple(spec["x_std_shape"])
-    xstd = Standardizer(mean=jnp.zeros(xs), std=jnp.ones(xs))
+    prior, embedding, x_shape, xstd = skeleton_parts(spec)
     return ConditionalFlow(
         key,
         prior,
-        embedding_from_spec(name, espec),
-        tuple(spec["x_shape"]),
+        embedding,
+        x_shape,
         num_layers=spec["num_layers"],
         num_bins=spec["num_bins"],
         hidden=spec["hidden"],

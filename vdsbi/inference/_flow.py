@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 from jaxtyping import Array, Bool, Float, PRNGKeyArray
 
-from ._embeddings import AbstractEmbedding
+from ._embeddings import AbstractEmbedding, embedding_from_spec
 from ._prior import BoxPrior
 from ._spline import num_spline_params, rq_spline_forward, rq_spline_inverse
 from ._standardize import Standardizer
@@ -354,6 +354,16 @@ class ConditionalFlow(eqx.Module):
         }
 
 
+def skeleton_parts(spec: dict[str, Any]) -> tuple[BoxPrior, AbstractEmbedding, tuple[int, ...], Standardizer]:
+    """What every estimator's ``spec`` holds alike, rebuilt: the prior box, the embedding's
+    skeleton, the observation shape and an identity x standardiser of the stored shape."""
+    prior = BoxPrior(jnp.asarray(spec["low"]), jnp.asarray(spec["high"]), spec["names"])
+    name, espec = spec["embedding"]
+    xs = tuple(spec["x_std_shape"])
+    xstd = Standardizer(mean=jnp.zeros(xs), std=jnp.ones(xs))
+    return prior, embedding_from_spec(name, espec), tuple(spec["x_shape"]), xstd
+
+
 _MAX_REJECTION_ROUNDS = 100
 
 
@@ -395,7 +405,7 @@ def _rejection(draw: Callable, prior: BoxPrior, key: PRNGKeyArray, n: int) -> Fl
 def _warn_if_short(count, n) -> None:
     """Host side of `_rejection`: say so when draws had to be repeated (a posterior that left
     the box goes unnoticed otherwise: its draws look like any others)."""
-    short = int(jnp.min(count))  # vmapped over observations: the worst of them
+    short = int(count.min())  # a host array; vmapped over observations: the worst of them
     if short < n:
         warnings.warn(
             f"only {short} of {n} posterior draws fell inside the prior box in "

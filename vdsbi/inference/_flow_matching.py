@@ -23,8 +23,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from ._embeddings import AbstractEmbedding, embedding_from_spec
-from ._flow import _rejection
+from ._embeddings import AbstractEmbedding
+from ._flow import _rejection, skeleton_parts
 from ._loss import AbstractLoss
 from ._prior import BoxPrior
 from ._standardize import Standardizer
@@ -262,14 +262,12 @@ class FlowMatchingEstimator(eqx.Module):
 
 def fmpe_from_spec(spec: dict[str, Any]) -> FlowMatchingEstimator:
     """Skeleton :class:`FlowMatchingEstimator` with the structure in ``spec``."""
-    prior = BoxPrior(jnp.asarray(spec["low"]), jnp.asarray(spec["high"]), spec["names"])
-    name, espec = spec["embedding"]
-    xs = tuple(spec["x_std_shape"])
+    prior, embedding, x_shape, xstd = skeleton_parts(spec)
     return FlowMatchingEstimator(
         jax.random.key(0),
         prior,
-        embedding_from_spec(name, espec),
-        tuple(spec["x_shape"]),
+        embedding,
+        x_shape,
         hidden=spec["hidden"],
         num_blocks=spec["num_blocks"],
         num_freqs=spec["num_freqs"],
@@ -277,7 +275,7 @@ def fmpe_from_spec(spec: dict[str, Any]) -> FlowMatchingEstimator:
         time_power=spec["time_power"],
         sigma_min=spec["sigma_min"],
         theta_map=spec["theta_map"],
-        x_standardizer=Standardizer(mean=jnp.zeros(xs), std=jnp.ones(xs)),
+        x_standardizer=xstd,
     )
 
 
