@@ -104,6 +104,14 @@ def config_for(budget: int, method: str = "npe", **overrides) -> NPEConfig:
     later rounds no longer stop on the atomic loss's SGD noise within a few epochs; the average
     adds nothing to a step's cost, ``train_profile.py --steps``). TSNPE at 10⁴ did not change
     (0.554/0.553 either way): it keeps the library's default (off).
+
+    APT penalises the flow's mass outside the box (``leak_weight=10`` on 64 strided rows of
+    each batch, s27): the atomic loss cannot see that mass with the flow on θ, and at 10⁵ it
+    failed at 3 of 30 observations (slcp 7 and 8, gaussian_linear_uniform 3: 0.918, 0.971,
+    0.610; with the penalty 0.691, 0.684, 0.519). At 10³ and 10⁴ (all 10 observations,
+    ``results/apt_variants/leak_grid.json``) it changed seven cells within noise and slcp 10⁴
+    for the worse (0.798 → 0.814, still under sbibm's 0.845: where the posterior rests on the
+    box it pulls the flow in from the face), and took 14-45 % longer to train.
     """
     base = NPEConfig(
         batch_size=128 if budget <= 10_000 else 512,
@@ -113,6 +121,8 @@ def config_for(budget: int, method: str = "npe", **overrides) -> NPEConfig:
         theta_map="affine",
         patience_unit="epochs" if method == "tsnpe" or (method == "apt" and budget < 10_000) else "new_data",
         average_epochs=1.0 if method in ("npe", "apt") else NPEConfig.average_epochs,
+        leak_weight=10.0 if method == "apt" else NPEConfig.leak_weight,
+        leak_rows=64 if method == "apt" else NPEConfig.leak_rows,
     )
     return dataclasses.replace(base, **{**(FMPE if method == "fmpe" else {}), **overrides})
 
