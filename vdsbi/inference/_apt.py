@@ -156,7 +156,7 @@ def _propose(
         return theta, {"proposal": "truncated_prior", **tinfo}
     k_draw, k_mass = jax.random.split(key)
     theta = _sample(flow, k_draw, problem.x_o, n)
-    # below 1/_MAX_REJECTION_ROUNDS of it inside the box, the proposal repeats draws
+    # below 1/_rejection._MAX_REJECTION_ROUNDS of it inside the box, the proposal repeats draws
     mass = float(_box_mass(flow, k_mass, problem.x_o, _BOX_MASS_DRAWS))
     return theta, {"proposal": "posterior", "box_mass": mass}
 

@@ -13,8 +13,6 @@ Layers are stacked with ``eqx.filter_vmap`` and applied with ``lax.scan``.
 """
 
 import math
-import warnings
-from collections.abc import Callable
 from typing import Any
 
 import equinox as eqx
@@ -25,6 +23,7 @@ from jaxtyping import Array, Bool, Float, PRNGKeyArray
 
 from ._embeddings import AbstractEmbedding, embedding_from_spec
 from ._prior import BoxPrior
+from ._rejection import box_rejection
 from ._spline import num_spline_params, rq_spline_forward, rq_spline_inverse
 from ._standardize import Standardizer
 
@@ -327,7 +326,7 @@ class ConditionalFlow(eqx.Module):
 
         if self.theta_map == "logit":
             return draw(key)
-        return _rejection(draw, self.prior, key, n)
+        return box_rejection(draw, self.prior, key, n)
 
     def sample(self, key: PRNGKeyArray, x: Float[Array, "..."], n: int) -> Float[Array, "n d"]:
         """``n`` draws of θ from ``q(θ | x)`` for ONE x; always strictly inside the prior box."""
@@ -362,56 +361,3 @@ def skeleton_parts(spec: dict[str, Any]) -> tuple[BoxPrior, AbstractEmbedding, t
     xs = tuple(spec["x_std_shape"])
     xstd = Standardizer(mean=jnp.zeros(xs), std=jnp.ones(xs))
     return prior, embedding_from_spec(name, espec), tuple(spec["x_shape"]), xstd
-
-
-_MAX_REJECTION_ROUNDS = 100
-
-
-def _rejection(draw: Callable, prior: BoxPrior, key: PRNGKeyArray, n: int) -> Float[Array, "n d"]:
-    """``n`` draws of ``draw(key) -> (n, d)`` inside the box, in at most 100 rounds of ``n``.
-
-    Slots still empty after that (under 1 % of the mass inside the box) repeat the accepted
-    draws in turn: repeated draws of the right density, where clipping new ones to the box (as
-    before s25) piled them on its faces. APT's flow on slcp's observation 7 (10⁴ simulations)
-    kept 0.6 % of its mass in the box: 10⁴ draws would need 170 rounds. Only if none was
-    accepted are they clipped, so the result always lies in the box.
-    """
-    low, high = prior.low, prior.high
-
-    def body(carry):
-        i, count, out = carry
-        cand = draw(jax.random.fold_in(key, i))
-        ok = jnp.all((cand >= low) & (cand <= high), axis=1)
-        pos = count + jnp.cumsum(ok) - 1
-        slot = jnp.where(ok & (pos < n), pos, n)  # n: out of range, dropped
-        out = out.at[slot].set(cand, mode="drop")
-        return i + 1, jnp.minimum(count + jnp.sum(ok, dtype=count.dtype), n), out
-
-    def cond(carry):
-        i, count, _ = carry
-        return (count < n) & (i < _MAX_REJECTION_ROUNDS)
-
-    init = (jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), jnp.zeros((n, prior.dim), low.dtype))
-    _, count, out = jax.lax.while_loop(cond, body, init)
-    jax.debug.callback(lambda c: _warn_if_short(c, n), count)
-    slots = jnp.arange(n)
-    repeat = out[slots % jnp.maximum(count, 1)]
-    fill = jnp.where(
-        count > 0, repeat, jnp.clip(draw(jax.random.fold_in(key, _MAX_REJECTION_ROUNDS)), low, high)
-    )
-    return jnp.where((slots < count)[:, None], out, fill)
-
-
-def _warn_if_short(count, n) -> None:
-    """Host side of `_rejection`: say so when draws had to be repeated (a posterior that left
-    the box goes unnoticed otherwise: its draws look like any others)."""
-    short = int(count.min())  # a host array; vmapped over observations: the worst of them
-    if short < n:
-        warnings.warn(
-            f"only {short} of {n} posterior draws fell inside the prior box in "
-            f"{_MAX_REJECTION_ROUNDS} rounds of rejection (under 1 % of the flow's mass lies in "
-            "the box); the rest repeat them. The estimator has leaked out of the box: consider "
-            "theta_map='logit' or NPEConfig.leak_weight > 0.",
-            RuntimeWarning,
-            stacklevel=2,
-        )

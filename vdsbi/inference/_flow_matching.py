@@ -24,9 +24,10 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ._embeddings import AbstractEmbedding
-from ._flow import _rejection, skeleton_parts
+from ._flow import skeleton_parts
 from ._loss import AbstractLoss
 from ._prior import BoxPrior
+from ._rejection import box_rejection
 from ._standardize import Standardizer
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -233,7 +234,7 @@ class FlowMatchingEstimator(eqx.Module):
 
         if self.theta_map == "logit":
             return draw(key)
-        return _rejection(draw, self.prior, key, n)
+        return box_rejection(draw, self.prior, key, n)
 
     def sample(self, key: PRNGKeyArray, x: Float[Array, "..."], n: int) -> Float[Array, "n d"]:
         """``n`` draws of θ from ``q(θ | x)`` for ONE x; always inside the prior box."""
