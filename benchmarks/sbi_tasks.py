@@ -113,7 +113,10 @@ def config_for(budget: int, method: str = "npe", **overrides) -> NPEConfig:
     0.610; with the penalty 0.691, 0.684, 0.519). At 10³ and 10⁴ (all 10 observations,
     ``results/apt_variants/leak_grid.json``) it changed seven cells within noise and slcp 10⁴
     for the worse (0.798 → 0.814, still under sbibm's 0.845: where the posterior rests on the
-    box it pulls the flow in from the face), and took 14-45 % longer to train.
+    box it pulls the flow in from the face), and took 14-45 % longer to train. sbi's combined
+    loss instead (``combined_loss=True``, s28, ``results/apt_variants/combined_grid.json``) was
+    worse on slcp at 10³ (0.957 → 0.971, a miss) and 10⁴ (0.814 → 0.835), better on two_moons
+    10⁴ (0.544 → 0.531).
     """
     base = NPEConfig(
         batch_size=128 if budget <= 10_000 else 512,
