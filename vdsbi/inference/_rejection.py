@@ -41,10 +41,14 @@ def box_rejection(draw: Callable, prior: BoxPrior, key: PRNGKeyArray, n: int) ->
     _, count, out = jax.lax.while_loop(cond, body, init)
     jax.debug.callback(lambda c: _warn_if_short(c, n), count)
     slots = jnp.arange(n)
-    repeat = out[slots % jnp.maximum(count, 1)]
-    fill = jnp.where(
-        count > 0, repeat, jnp.clip(draw(jax.random.fold_in(key, _MAX_REJECTION_ROUNDS)), low, high)
-    )
+
+    def repeat():
+        return out[slots % jnp.maximum(count, 1)]
+
+    def clipped():  # a cond, so the usual case does not pay for one more draw
+        return jnp.clip(draw(jax.random.fold_in(key, _MAX_REJECTION_ROUNDS)), low, high)
+
+    fill = jax.lax.cond(count > 0, repeat, clipped)
     return jnp.where((slots < count)[:, None], out, fill)
 
 
