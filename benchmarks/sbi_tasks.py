@@ -5,7 +5,8 @@ Usage:
     python benchmarks/sbi_tasks.py --quick    # two_moons, NPE+APT at 10³, 2 observations
 
 Writes ``benchmarks/results/sbi_tasks.json`` after every finished cell (nothing is lost if the
-run is interrupted) and ``benchmarks/results/sbi_tasks.md`` with the table.
+run is interrupted), ``benchmarks/results/sbi_tasks.md`` with the table and ``sbi_tasks.png``
+with the figure (`_grid_plot.py`).
 
 Protocol (differences from sbibm are stated, not hidden):
 * ``--observations sbibm`` (default): sbibm's own observations 1..n_obs and its reference
@@ -44,6 +45,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _sbibm  # noqa: E402
+from _grid_plot import plot_grid  # noqa: E402
 
 from vdsbi.diagnostics import c2st  # noqa: E402
 from vdsbi.inference import IdentityEmbedding, NPEConfig, apt  # noqa: E402
@@ -371,7 +373,9 @@ def main():
     )
     ap.add_argument("--force", action="store_true", help="rerun and replace stored cells (else resume)")
     ap.add_argument("--c2st-jobs", type=int, default=1, help="parallel C2ST folds (same result as 1)")
-    ap.add_argument("--table", action="store_true", help="only rewrite the .md table from the JSON")
+    ap.add_argument(
+        "--table", action="store_true", help="only rewrite the .md table and the .png figure from the JSON"
+    )
     ap.add_argument("--out", default=os.path.join(HERE, "results", "sbi_tasks.json"))
     ap.add_argument(
         "--merge-from",
@@ -455,11 +459,15 @@ def _load(path):
 
 
 def _write_md(path, results):
-    md = os.path.splitext(path)[0] + ".md"
-    with open(md + ".tmp", "w") as f:
+    """The table (``.md``) and the figure (``.png``) of ``results`` beside ``path``."""
+    stem = os.path.splitext(path)[0]
+    with open(stem + ".md.tmp", "w") as f:
         f.write("# sbibm tasks: C2ST (mean±sd over n observations) [training wall time]\n\n")
         f.write(table(results) + "\n")
-    os.replace(md + ".tmp", md)
+    os.replace(stem + ".md.tmp", stem + ".md")
+    stale = {_key(r) for r in results if not current(r)}
+    plot_grid(stem + ".tmp.png", results, PUBLISHED, BUDGETS, TASKS, stale)
+    os.replace(stem + ".tmp.png", stem + ".png")
 
 
 def _save(path, result, source, replace=False):

@@ -83,3 +83,5 @@ def test_saved_file_names_the_cells_devices_not_the_writers(grid, tmp_path):
     assert saved["observations"] == "sbibm"
     assert [r["method"] for r in saved["results"]] == ["npe", "apt"]
     assert (tmp_path / "grid.md").exists()
+    assert (tmp_path / "grid.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # the figure beside it
+    assert not list(tmp_path.glob("*.tmp*"))  # written whole, then renamed
