@@ -39,6 +39,23 @@ def test_gaussian_linear_uniform_reference_moments():
     np.testing.assert_allclose(ref.mean(0), dist.mean(), atol=5 * dist.std().max() / np.sqrt(20_000))
 
 
+def test_posterior_samples_exact_at_any_observation(getkey):
+    """`posterior_samples` at an x_o of nobody's observations (four of its entries beyond the box, where
+    the truncation dominates) has the truncated normal's mean and sd; slcp's is MCMC."""
+    task = get_task("gaussian_linear_uniform")
+    x_o = np.linspace(-1.4, 1.4, 10)
+    sd = np.sqrt(0.1)
+    dist = scipy.stats.truncnorm((-1 - x_o) / sd, (1 - x_o) / sd, loc=x_o, scale=sd)
+    samples = task.posterior_samples(getkey(), x_o, 20_000)
+    assert samples.dtype == np.float32 and samples.shape == (20_000, 10)
+    np.testing.assert_allclose(samples.mean(0), dist.mean(), atol=5 * dist.std().max() / np.sqrt(20_000))
+    np.testing.assert_allclose(samples.std(0), dist.std(), rtol=0.05)
+    assert (
+        all(get_task(n).exact_posterior for n in TASKS if n != "slcp")
+        and not get_task("slcp").exact_posterior
+    )
+
+
 def test_two_moons_reference_matches_likelihood():
     # Each reference draw must explain x_o: the implied noise radius r is N(0.1, 0.01²).
     task = get_task("two_moons")

@@ -45,9 +45,20 @@ class AbstractTask(abc.ABC):
         """``(θ_true, x_o)`` of observation ``num`` (1-based)."""
         return _observation(self, num)
 
+    #: whether `posterior_samples` is exact (False: MCMC, as slcp's)
+    exact_posterior: bool = True
+
     def reference_posterior_samples(self, num: int, n: int = 10_000) -> np.ndarray:
         """``n`` exact (or MCMC) samples from ``p(θ | x_o)`` of observation ``num``; cached."""
         return _reference(self, num, n)
+
+    def posterior_samples(self, key: PRNGKeyArray, x_o: np.ndarray, n: int) -> np.ndarray:
+        """``n`` samples (float32) from ``p(θ | x_o)`` for any ``x_o`` of shape ``(dim_x,)``:
+        exact where `exact_posterior`, else MCMC."""
+        samples = np.asarray(self._sample_reference(key, np.asarray(x_o, np.float64), n), np.float32)
+        if samples.shape != (n, self.dim_theta):
+            raise AssertionError(f"{self.name}: {samples.shape} samples, not {(n, self.dim_theta)}")
+        return samples
 
     @abc.abstractmethod
     def _sample_reference(self, key: PRNGKeyArray, x_o: np.ndarray, n: int) -> np.ndarray: ...
@@ -80,9 +91,7 @@ def _reference(task: AbstractTask, num: int, n: int) -> np.ndarray:
     _, x_o = task.observation(num)
     key = jax.random.fold_in(jax.random.key(REFERENCE_SEED), num)
     key = jax.random.fold_in(key, zlib.crc32(task.name.encode()) % 2**31)
-    samples = np.asarray(task._sample_reference(key, np.asarray(x_o, np.float64), n), np.float32)
-    assert samples.shape == (n, task.dim_theta)
-    return samples
+    return task.posterior_samples(key, x_o, n)
 
 
 def rejection(key, propose, accept_fn, n: int, chunk: int = 100_000) -> np.ndarray:

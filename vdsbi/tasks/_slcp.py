@@ -36,6 +36,7 @@ class SLCP(AbstractTask):
     name = "slcp"
     dim_theta = 5
     dim_x = 8
+    exact_posterior = False  # posterior_samples: MCMC (no closed form)
 
     @property
     def prior(self):
