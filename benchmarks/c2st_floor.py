@@ -10,7 +10,7 @@ the floor was partly luck of the classifier.
 
 Usage (needs ``pip install -e '.[bench]'``):
     python benchmarks/c2st_floor.py --c2st-jobs 2     # three tasks, observations 1-10
-    python benchmarks/c2st_floor.py --quick           # gaussian_linear_uniform, 1 obs, 2000 samples
+    python benchmarks/c2st_floor.py --quick           # two_moons, 1 observation, 1000 samples
 
 Writes ``benchmarks/results/c2st_floor.json`` after every observation (a re-run resumes) and the
 table to ``benchmarks/results/c2st_floor.md``.
@@ -61,7 +61,7 @@ def table(results: dict) -> str:
         sd = c.std(ddof=1) if c.size > 1 else 0.0
         npe, snpe = PUBLISHED[(t, "npe")][-1], PUBLISHED[(t, "apt")][-1]
         lines.append(
-            f"| {t} | {c.mean():.3f} ± {sd:.3f} | {c.min():.3f} – {c.max():.3f} | {c.size} | {npe} / {snpe} |"
+            f"| {t} | {c.mean():.3f} ± {sd:.3f} | {c.min():.3f} – {c.max():.3f} | {c.size} | {npe:.3f} / {snpe:.3f} |"
         )
     return "\n".join(lines)
 
@@ -88,7 +88,7 @@ def main():
     ap.add_argument("--out", default=os.path.join(HERE, "results", "c2st_floor.json"))
     args = ap.parse_args()
     if args.quick:
-        args.tasks, args.n_obs, args.num_samples = ["gaussian_linear_uniform"], 1, 2_000
+        args.tasks, args.n_obs, args.num_samples = ["two_moons"], 1, 1_000
     stored = {}
     if not args.quick and os.path.exists(args.out):
         with open(args.out) as f:
