@@ -75,7 +75,7 @@ def plot_grid(path, results, published, budgets, tasks, stale):
             labelled.setdefault(label, handle)
     fig.legend(labelled.values(), labelled.keys(), fontsize=8, loc="outside right upper")
     fig.suptitle(
-        "sbibm tasks, observations 1-10: ours (mean ± sd) against sbibm's published figures; "
+        "sbibm tasks, observations 1-10: ours (mean ± sd) against sbibm's published figures\n"
         "hollow: run with other settings than now (†); n=k: a cell with k < 10 observations so far",
         fontsize=9,
     )
