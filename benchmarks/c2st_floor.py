@@ -30,7 +30,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _sbibm  # noqa: E402
-from sbi_tasks import PUBLISHED  # noqa: E402
+from sbi_tasks import PUBLISHED, _load  # noqa: E402
 
 from vdsbi.tasks import get_task  # noqa: E402
 
@@ -91,13 +91,6 @@ def excess_table(floor: dict, grid: list) -> str:
     return "\n".join(lines)
 
 
-def _grid(path: str) -> list:
-    if not os.path.exists(path):
-        return []
-    with open(path) as f:
-        return json.load(f)["results"]
-
-
 def _save(path: str, results: dict, meta: dict) -> None:
     with open(path + ".tmp", "w") as f:
         json.dump({"results": results, "meta": meta}, f, indent=1)
@@ -107,7 +100,7 @@ def _save(path: str, results: dict, meta: dict) -> None:
         f.write("# C2ST of exact posterior samples against sbibm's reference (the protocol's floor)\n\n")
         f.write(table(results) + "\n")
         f.write(f"\nThe grid's cells (`{os.path.relpath(GRID, HERE)}`) against the floor:\n\n")
-        f.write(excess_table(results, _grid(GRID)) + "\n")
+        f.write(excess_table(results, _load(GRID)) + "\n")
     os.replace(md + ".tmp", md)
 
 
@@ -151,7 +144,7 @@ def main():
     print(table(stored))
     if not args.quick:
         _save(args.out, stored, meta)  # the grid may have grown since: its table is rewritten
-        print(excess_table(stored, _grid(GRID)))
+        print(excess_table(stored, _load(GRID)))
 
 
 if __name__ == "__main__":

@@ -315,7 +315,7 @@ def todo(old, method, config, obs_ids):
 
 def table(results) -> str:
     by = {(r["task"], r["method"], r["budget"]): r for r in results}
-    stale = {_key(r) for r in results if not current(r)}
+    stale = _stale(results)
     methods = ["npe", "apt"] + sorted({r["method"] for r in results} - {"npe", "apt"})
     head = "| task | method | " + " | ".join(f"{b:.0e}" for b in BUDGETS) + " |"
     lines = [head, "|---|---|" + "---|" * len(BUDGETS)]
@@ -341,6 +341,11 @@ def table(results) -> str:
             "\n† run with other settings than `config_for` gives now (the cell's `config` says which)."
         )
     return "\n".join(lines)
+
+
+def _stale(results) -> set:
+    """Keys of the cells run with other settings than `config_for` gives now (the † cells)."""
+    return {_key(r) for r in results if not current(r)}
 
 
 def current(cell) -> bool:
@@ -465,8 +470,7 @@ def _write_md(path, results):
         f.write("# sbibm tasks: C2ST (mean±sd over n observations) [training wall time]\n\n")
         f.write(table(results) + "\n")
     os.replace(stem + ".md.tmp", stem + ".md")
-    stale = {_key(r) for r in results if not current(r)}
-    plot_grid(stem + ".tmp.png", results, PUBLISHED, BUDGETS, TASKS, stale)
+    plot_grid(stem + ".tmp.png", results, PUBLISHED, BUDGETS, TASKS, _stale(results))
     os.replace(stem + ".tmp.png", stem + ".png")
 
 
