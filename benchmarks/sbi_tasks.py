@@ -154,10 +154,16 @@ class _Observations:
 def _rounds(state):
     """Per round: epochs, best epoch, patience (epochs), wall seconds and, for TSNPE, how the
     truncated prior was drawn (proposal, acceptance, draws filled in from the wider proposal);
-    for APT, the proposal's mass inside the box (``box_mass``)."""
+    for APT, the posterior's mass inside the box (``box_mass``) and, where that was under
+    ``min_proposal_box_mass``, ``"proposal": "prior (leaked)"``."""
     keys = ("epochs", "best_epoch", "patience", "train_s")
     extra = ("region_proposal", "acceptance", "num_filled", "box_mass")
-    return [{k: h.get(k) for k in keys} | {k: h[k] for k in extra if k in h} for h in state.history]
+    return [
+        {k: h.get(k) for k in keys}
+        | {k: h[k] for k in extra if k in h}
+        | ({"proposal": h["proposal"]} if h.get("proposal") == "prior (leaked)" else {})
+        for h in state.history
+    ]
 
 
 def _provenance():
@@ -192,7 +198,8 @@ def train_posterior(task, method, budget, cfg, key, x_o, obs_id=None):
         print(
             f"    {task.name} {method} {budget} {where}round {state.round}/{rounds}: "
             f"{h['epochs']} epochs (best {h['best_epoch']}), {h['train_s']:.0f} s"
-            + (f", proposal {h['box_mass']:.1%} in the box" if "box_mass" in h else ""),
+            + (f", posterior {h['box_mass']:.1%} in the box" if "box_mass" in h else "")
+            + (", proposed from the prior" if h.get("proposal") == "prior (leaked)" else ""),
             flush=True,
         )
 

@@ -507,3 +507,26 @@ def test_npe_on_a_new_data_size_reuses_the_compiled_loops(getkey):
         npe(getkey(), prior, theta, x, embedding=IdentityEmbedding(2), config=cfg)
         new = [TRACE_COUNTS[k] - before[k] for k in names]
         assert max(new) <= 1 if n == 400 else new == [0, 0]
+
+
+def test_leaked_posterior_falls_back_to_the_prior(getkey):
+    # With the flow on θ some mass always lies outside the box, so a threshold of 1 makes every
+    # later round's posterior "leaked": those rounds must propose from the prior (uniform on the
+    # box, checked by KS), and with the threshold at 0 the same run proposes from the posterior.
+    from scipy import stats
+
+    prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
+    kw = dict(embedding=IdentityEmbedding(2), rounds=2, sims_per_round=300)
+    key, x_o = getkey(), jnp.array([0.8, 0.8])
+    for threshold, kind in [(1.0, "prior (leaked)"), (0.0, "posterior")]:
+        cfg = dataclasses.replace(TINY, theta_map="affine", min_proposal_box_mass=threshold)
+        _, state = apt(key, _gauss_sim, prior, x_o, config=cfg, **kw)
+        h = state.history[1]
+        assert h["proposal"] == kind and 0.0 < h["box_mass"] < 1.0
+    _, state = apt(key, _gauss_sim, prior, x_o, config=dataclasses.replace(cfg, min_proposal_box_mass=1.0), **kw)
+    second = np.asarray(state.theta)[np.asarray(state.round_ids) == 1]
+    assert len(second) > 200
+    for j in range(2):
+        assert stats.kstest((second[:, j] + 1) / 2, "uniform").pvalue > 1e-3
+    with pytest.raises(ValueError, match="min_proposal_box_mass"):
+        NPEConfig(min_proposal_box_mass=1.5)

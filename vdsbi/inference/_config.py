@@ -59,6 +59,9 @@ class NPEConfig:
             outside the box in box widths) added to the atomic loss; matters only for
             ``theta_map="affine"``, whose mass outside the box the atomic loss cannot see.
             0 (default): off.
+        min_proposal_box_mass: a sequential round whose posterior at x_o has less than this
+            share of its mass in the prior box proposes from the prior instead (below 1 %,
+            the default, the rejection sampler repeats draws; 0: never).
         leak_rows: rows of each batch the penalty draws for (evenly strided; 0, the default:
             every row). The draw costs about as much as the ten atoms' densities (1.67x the
             step at slcp, batch 512, with every row); a subset estimates the same penalty.
@@ -106,6 +109,7 @@ class NPEConfig:
     combined_loss: bool = False
     leak_weight: float = 0.0
     leak_rows: int = 0
+    min_proposal_box_mass: float = 0.01
     x_standardize: str = "channel"
     truncation_epsilon: float = 1e-4
     truncation_samples: int = 10_000
@@ -145,6 +149,8 @@ class NPEConfig:
             raise ValueError(f"truncation_widen must be >= 1, got {self.truncation_widen}")
         if self.leak_weight < 0:
             raise ValueError(f"leak_weight must be >= 0, got {self.leak_weight}")
+        if not 0.0 <= self.min_proposal_box_mass <= 1.0:
+            raise ValueError(f"min_proposal_box_mass must be in [0, 1], got {self.min_proposal_box_mass}")
         if self.leak_rows < 0:
             raise ValueError(f"leak_rows must be >= 0, got {self.leak_rows}")
         if self.num_atoms < 2:
