@@ -518,13 +518,13 @@ def test_leaked_posterior_falls_back_to_the_prior(getkey):
     prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
     kw = dict(embedding=IdentityEmbedding(2), rounds=2, sims_per_round=300)
     key, x_o = getkey(), jnp.array([0.8, 0.8])
+    states = {}
     for threshold, kind in [(1.0, "prior (leaked)"), (0.0, "posterior")]:
         cfg = dataclasses.replace(TINY, theta_map="affine", min_proposal_box_mass=threshold)
-        _, state = apt(key, _gauss_sim, prior, x_o, config=cfg, **kw)
-        h = state.history[1]
+        _, states[threshold] = apt(key, _gauss_sim, prior, x_o, config=cfg, **kw)
+        h = states[threshold].history[1]
         assert h["proposal"] == kind and 0.0 < h["box_mass"] < 1.0
-    _, state = apt(key, _gauss_sim, prior, x_o, config=dataclasses.replace(cfg, min_proposal_box_mass=1.0), **kw)
-    second = np.asarray(state.theta)[np.asarray(state.round_ids) == 1]
+    second = np.asarray(states[1.0].theta)[np.asarray(states[1.0].round_ids) == 1]
     assert len(second) > 200
     for j in range(2):
         assert stats.kstest((second[:, j] + 1) / 2, "uniform").pvalue > 1e-3
