@@ -28,7 +28,8 @@ Cells are stored per observation (``per_observation``: C2ST, APT training, sampl
 seconds) with each run's commit, uncommitted changes, device and load average (``runs``). A
 stored cell with the same config is resumed: APT runs only the observations it lacks, so
 pieces (``--first-obs``/``--n-obs``, one heavy-lock hold each) build one cell; NPE (one network)
-reruns whole unless all requested observations are stored. ``--force`` replaces the cell.
+reruns whole unless all requested observations are stored. ``--force`` replaces the cell;
+``--redo`` reruns the requested observations of a sequential cell and replaces only those.
 """
 
 import argparse
@@ -384,6 +385,12 @@ def main():
         help="other NPEConfig fields, e.g. --set num_atoms=5 (use another --out for variants)",
     )
     ap.add_argument("--force", action="store_true", help="rerun and replace stored cells (else resume)")
+    ap.add_argument(
+        "--redo",
+        action="store_true",
+        help="sequential cells: rerun the requested observations even where stored, replacing them "
+        "(after a change that alters only some observations; the rest of the cell stays)",
+    )
     ap.add_argument("--c2st-jobs", type=int, default=1, help="parallel C2ST folds (same result as 1)")
     ap.add_argument(
         "--table", action="store_true", help="only rewrite the .md table and the .png figure from the JSON"
@@ -411,6 +418,8 @@ def main():
     for b, m, t in cells:
         stored = None if args.force else {_key(r): r for r in _load(args.out)}.get((t, m, b))
         ids = todo(stored, m, dataclasses.asdict(config_for(b, m, **overrides)), obs_ids)
+        if args.redo and m in SEQUENTIAL:
+            ids = list(obs_ids)
         if not ids:  # resume: finished observations are skipped
             continue
         print(f"cell {t} {m} {b} observations {ids}", flush=True)
