@@ -59,13 +59,13 @@ class NPEConfig:
             outside the box in box widths) added to the atomic loss; matters only for
             ``theta_map="affine"``, whose mass outside the box the atomic loss cannot see.
             0 (default): off.
+        leak_rows: rows of each batch the penalty draws for (evenly strided; 0, the default:
+            every row). The draw costs about as much as the ten atoms' densities (1.67x the
+            step at slcp, batch 512, with every row); a subset estimates the same penalty.
         min_proposal_box_mass: a sequential round whose posterior at x_o has less than this
             share of its mass in the prior box proposes from the prior instead (0, the default:
             never). Below 1 % the rejection sampler repeats draws (under 100·mass of them are
             distinct); at 1 % the fallback made slcp 10³ observations 3 and 5 worse (s30).
-        leak_rows: rows of each batch the penalty draws for (evenly strided; 0, the default:
-            every row). The draw costs about as much as the ten atoms' densities (1.67x the
-            step at slcp, batch 512, with every row); a subset estimates the same penalty.
         x_standardize: ``"channel"`` (statistics over all axes but the last), ``"global"``,
             ``"trajectory"`` (minus the mean trajectory, per-channel scale; see `Standardizer.fit`)
             or ``"none"``.
