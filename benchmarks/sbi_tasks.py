@@ -162,9 +162,14 @@ def _rounds(state):
     return [
         {k: h.get(k) for k in keys}
         | {k: h[k] for k in extra if k in h}
-        | ({"proposal": h["proposal"]} if h.get("proposal") == "prior (leaked)" else {})
+        | ({"proposal": h["proposal"]} if _fell_back(h) else {})
         for h in state.history
     ]
+
+
+def _fell_back(h) -> bool:
+    """Whether APT round ``h`` proposed from the prior because its posterior had leaked."""
+    return h.get("proposal") == "prior (leaked)"
 
 
 def _provenance():
@@ -200,7 +205,7 @@ def train_posterior(task, method, budget, cfg, key, x_o, obs_id=None):
             f"    {task.name} {method} {budget} {where}round {state.round}/{rounds}: "
             f"{h['epochs']} epochs (best {h['best_epoch']}), {h['train_s']:.0f} s"
             + (f", posterior {h['box_mass']:.1%} in the box" if "box_mass" in h else "")
-            + (", proposed from the prior" if h.get("proposal") == "prior (leaked)" else ""),
+            + (", proposed from the prior" if _fell_back(h) else ""),
             flush=True,
         )
 
