@@ -151,6 +151,13 @@ def test_leak_penalty_is_zero_for_the_logit_map_and_adds_to_the_atomic_loss(getk
     got8 = AtomicLoss(num_atoms=5, leak_weight=3.0, leak_rows=8)(affine, theta, x, mask, key)
     np.testing.assert_allclose(float(got8), float(plain + 3.0 * pen8), rtol=1e-5)
     assert float(pen8) != float(pen)  # not vacuous: another set of draws
+    # at an observation too: as many draws (8) at x_o's context, with their own key
+    x_o = x[5]
+    at = jnp.broadcast_to(affine.context(jnp.asarray(x_o)), ctx8.shape)
+    pen_o = leak_penalty(affine, jax.random.fold_in(k_leak, 1), at)
+    got_o = AtomicLoss(num_atoms=5, leak_weight=3.0, leak_rows=8, leak_at=x_o)(affine, theta, x, mask, key)
+    assert float(pen_o) > 0
+    np.testing.assert_allclose(float(got_o), float(plain + 3.0 * (pen8 + pen_o)), rtol=1e-5)
 
 
 def _tiny_problem(getkey, n):

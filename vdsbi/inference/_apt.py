@@ -235,6 +235,7 @@ def _train_round(
             combined=config.combined_loss,
             leak_weight=config.leak_weight,
             leak_rows=config.leak_rows,
+            leak_at=np.asarray(problem.x_o) if config.leak_at_observation else None,
         )
     flow, finfo = fit(
         k_train,

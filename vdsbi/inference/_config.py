@@ -62,6 +62,8 @@ class NPEConfig:
         leak_rows: rows of each batch the penalty draws for (evenly strided; 0, the default:
             every row). The draw costs about as much as the ten atoms' densities (1.67x the
             step at slcp, batch 512, with every row); a subset estimates the same penalty.
+        leak_at_observation: also penalise the flow's mass outside the box at x_o itself (as
+            many draws as ``leak_rows``; `AtomicLoss.leak_at`). False (default): the batch only.
         min_proposal_box_mass: a sequential round whose posterior at x_o has less than this
             share of its mass in the prior box proposes from the prior instead (0, the default:
             never). Below 1 % the rejection sampler repeats draws (under 100·mass of them are
@@ -110,6 +112,7 @@ class NPEConfig:
     combined_loss: bool = False
     leak_weight: float = 0.0
     leak_rows: int = 0
+    leak_at_observation: bool = False
     min_proposal_box_mass: float = 0.0
     x_standardize: str = "channel"
     truncation_epsilon: float = 1e-4

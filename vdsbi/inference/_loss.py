@@ -105,12 +105,18 @@ def leak_rows_of(contexts: Float[Array, "batch c"], rows: int) -> Float[Array, "
 
 class AtomicLoss(AbstractLoss):
     """APT / SNPE-C atomic loss with ``num_atoms`` atoms drawn from the batch, plus
-    ``leak_weight`` times `leak_penalty` (0: off) on ``leak_rows`` rows of it (0: all)."""
+    ``leak_weight`` times `leak_penalty` (0: off) on ``leak_rows`` rows of it (0: all).
+
+    ``leak_at`` (one example, e.g. the observation x_o; None: off) adds the same penalty on as
+    many draws at its context: the batch's contexts are the proposal's, and a posterior that
+    leaks only at x_o (slcp 10⁵ observation 4) is penalised too weakly by them to stop it.
+    """
 
     num_atoms: int = eqx.field(static=True, default=10)
     combined: bool = eqx.field(static=True, default=False)
     leak_weight: float = eqx.field(static=True, default=0.0)
     leak_rows: int = eqx.field(static=True, default=0)
+    leak_at: Float[Array, "..."] | None = None
 
     def __call__(self, flow, theta, x, prior_mask, key):
         b = theta.shape[0]
@@ -128,6 +134,10 @@ class AtomicLoss(AbstractLoss):
         lp = jax.vmap(jax.vmap(flow.prior.log_prob))(atom_theta)
         loss = _atomic_from_log_probs(lq, lp, prior_mask if self.combined else None)
         if self.leak_weight > 0:
-            pen = leak_penalty(flow, k_leak, leak_rows_of(contexts, self.leak_rows))
+            rows = leak_rows_of(contexts, self.leak_rows)
+            pen = leak_penalty(flow, k_leak, rows)
+            if self.leak_at is not None:
+                at = jnp.broadcast_to(flow.context(jnp.asarray(self.leak_at)), rows.shape)
+                pen = pen + leak_penalty(flow, jax.random.fold_in(k_leak, 1), at)
             loss = loss + self.leak_weight * pen
         return loss
