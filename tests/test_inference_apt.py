@@ -397,6 +397,8 @@ def test_new_config_fields_are_checked():
         NPEConfig(leak_weight=-0.1)
     with pytest.raises(ValueError, match="leak_rows"):
         NPEConfig(leak_rows=-1)
+    with pytest.raises(ValueError, match="leak_at_observation"):
+        NPEConfig(leak_at_observation=True)
 
 
 def test_ensemble_members_are_trained_independently_at_once(getkey):

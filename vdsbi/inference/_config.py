@@ -157,6 +157,8 @@ class NPEConfig:
             raise ValueError(f"min_proposal_box_mass must be in [0, 1], got {self.min_proposal_box_mass}")
         if self.leak_rows < 0:
             raise ValueError(f"leak_rows must be >= 0, got {self.leak_rows}")
+        if self.leak_at_observation and self.leak_weight == 0:
+            raise ValueError("leak_at_observation needs leak_weight > 0 (it adds to that penalty)")
         if self.num_atoms < 2:
             raise ValueError("num_atoms must be >= 2")
 
