@@ -273,15 +273,20 @@ def summarise(cell):
     """Recompute the cell's summary fields from its per-observation records and runs."""
     recs = sorted(cell["per_observation"], key=lambda r: r["obs_id"])
     scores = [r["c2st"] for r in recs]
+    runs = cell["runs"]
     if cell["method"] in SEQUENTIAL:
-        times = [r["train_s"] for r in recs]
+        device_of = {i: run["device"] for run in runs for i in run["obs_ids"]}  # a later run wins
+        timed = [(device_of.get(r["obs_id"], "?"), r["train_s"]) for r in recs]
         invalid = sum(r.get("invalid", 0) for r in recs)
         rounds = [r["rounds"] for r in recs]
     else:  # amortised: one training per run (one run per NPE cell, see `merge`)
-        times = [run["train_s"] for run in cell["runs"]]
-        invalid = sum(run.get("invalid", 0) for run in cell["runs"])
-        rounds = [run["rounds"] for run in cell["runs"]]
-    runs = cell["runs"]
+        timed = [(run["device"], run["train_s"]) for run in runs]
+        invalid = sum(run.get("invalid", 0) for run in runs)
+        rounds = [run["rounds"] for run in runs]
+    times = [t for _, t in timed]
+    # A cell may join pieces run on other devices (a GPU's observation trains several times
+    # faster): the mean over all says little then, so each device's mean is kept as well.
+    by_device = {d: float(np.mean([t for e, t in timed if e == d])) for d in sorted({d for d, _ in timed})}
     return {
         **cell,
         "per_observation": recs,
@@ -290,6 +295,7 @@ def summarise(cell):
         "n_obs": len(scores),
         "obs_ids": [r["obs_id"] for r in recs],
         "train_s": float(np.mean(times)),
+        "train_s_by_device": by_device,
         "c2st": scores,
         "num_invalid_simulations": int(invalid),
         "published": PUBLISHED[(cell["task"], cell["method"])][BUDGETS.index(cell["budget"])],
@@ -349,7 +355,7 @@ def table(results) -> str:
                     dagger = " †" if _key(r) in stale else ""
                     cells.append(
                         f"{r['c2st_mean']:.3f}±{r['c2st_sd']:.3f} n={r['n_obs']}{ref}{mark}{dagger} "
-                        f"[{r['train_s']:.0f}s]"
+                        f"[{_times(r)}]"
                     )
             lines.append(f"| {t} | {m} | " + " | ".join(cells) + " |")
     if stale:
@@ -357,6 +363,14 @@ def table(results) -> str:
             "\n† run with other settings than `config_for` gives now (the cell's `config` says which)."
         )
     return "\n".join(lines)
+
+
+def _times(cell) -> str:
+    """The cell's training seconds: ``"346s"``, or per device where pieces ran on several."""
+    by_device = cell.get("train_s_by_device", {})
+    if len(by_device) < 2:
+        return f"{cell['train_s']:.0f}s"
+    return ", ".join(f"{t:.0f}s {d.split(':')[0]}" for d, t in by_device.items())
 
 
 def _stale(results) -> set:

@@ -85,3 +85,15 @@ def test_saved_file_names_the_cells_devices_not_the_writers(grid, tmp_path):
     assert (tmp_path / "grid.md").exists()
     assert (tmp_path / "grid.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # the figure beside it
     assert not list(tmp_path.glob("*.tmp*"))  # written whole, then renamed
+
+
+def test_a_cell_joined_across_devices_keeps_each_devices_training_time(grid):
+    cpu = cell(grid, "apt", {1: 0.6, 2: 0.6})
+    gpu = cell(grid, "apt", {3: 0.6}, device="gpu:H100")
+    gpu["per_observation"][0]["train_s"] = 4.0
+    merged = grid.merge(cpu, grid.summarise(gpu))
+    assert merged["train_s_by_device"] == {"cpu:cpu": 1.0, "gpu:H100": 4.0}
+    assert merged["train_s"] == pytest.approx(2.0)
+    row = next(line for line in grid.table([merged]).splitlines() if line.startswith("| two_moons | apt |"))
+    assert "[1s cpu, 4s gpu]" in row
+    assert "[1s]" in grid.table([cpu])  # one device: one figure, as before
