@@ -123,7 +123,7 @@ def config_for(budget: int, method: str = "npe", **overrides) -> NPEConfig:
     ``results/apt_variants/leak_at_xo.json``) turned slcp 10⁵ observation 4's leak (1.000) into
     0.636 (observations 2, 3 and 7: 0.592, 0.650, 0.695 against 0.577, 0.626, 0.701) and
     scored the slcp 10⁵ cell 0.620 ± 0.041 over 10 observations (sbibm 0.666; 0.690 ± 0.162 over six
-    without it, one failure), so APT uses it at 10⁵ (s32). Not below: slcp 10³ 0.966 (a miss,
+    without it, one failure), so APT uses it at 10⁵ (s32); left off below: slcp 10³ 0.966 (a miss,
     against 0.957) and 10⁴ 0.811 (0.814) at 14 % more time.
     """
     base = NPEConfig(
