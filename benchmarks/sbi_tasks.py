@@ -163,9 +163,10 @@ def _rounds(state):
     """Per round: epochs, best epoch, patience (epochs), wall seconds and, for TSNPE, how the
     truncated prior was drawn (proposal, acceptance, draws filled in from the wider proposal);
     for APT, the posterior's mass inside the box (``box_mass``) and, where that was under
-    ``min_proposal_box_mass``, ``"proposal": "prior (leaked)"``."""
+    ``min_proposal_box_mass``, ``"proposal": "prior (leaked)"``; under ``min_box_mass_ratio``
+    the mass after the round's training and whether the round was undone."""
     keys = ("epochs", "best_epoch", "patience", "train_s")
-    extra = ("region_proposal", "acceptance", "num_filled", "box_mass")
+    extra = ("region_proposal", "acceptance", "num_filled", "box_mass", "box_mass_after", "reverted")
     return [
         {k: h.get(k) for k in keys}
         | {k: h[k] for k in extra if k in h}

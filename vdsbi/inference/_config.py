@@ -68,6 +68,10 @@ class NPEConfig:
             share of its mass in the prior box proposes from the prior instead (0, the default:
             never). Below 1 % the rejection sampler repeats draws (under 100·mass of them are
             distinct); at 1 % the fallback made slcp 10³ observations 3 and 5 worse (s30).
+        min_box_mass_ratio: a sequential round after which the posterior at x_o keeps less than
+            this share of the box mass it had before the round is undone: its simulations stay,
+            the previous round's flow is kept (0, the default: never). Guards the flow on θ
+            against sliding out across a face it rests on (`_apt._guard_leak`).
         x_standardize: ``"channel"`` (statistics over all axes but the last), ``"global"``,
             ``"trajectory"`` (minus the mean trajectory, per-channel scale; see `Standardizer.fit`)
             or ``"none"``.
@@ -114,6 +118,7 @@ class NPEConfig:
     leak_rows: int = 0
     leak_at_observation: bool = False
     min_proposal_box_mass: float = 0.0
+    min_box_mass_ratio: float = 0.0
     x_standardize: str = "channel"
     truncation_epsilon: float = 1e-4
     truncation_samples: int = 10_000
@@ -155,6 +160,8 @@ class NPEConfig:
             raise ValueError(f"leak_weight must be >= 0, got {self.leak_weight}")
         if not 0.0 <= self.min_proposal_box_mass <= 1.0:
             raise ValueError(f"min_proposal_box_mass must be in [0, 1], got {self.min_proposal_box_mass}")
+        if not 0.0 <= self.min_box_mass_ratio <= 1.0:
+            raise ValueError(f"min_box_mass_ratio must be in [0, 1], got {self.min_box_mass_ratio}")
         if self.leak_rows < 0:
             raise ValueError(f"leak_rows must be >= 0, got {self.leak_rows}")
         if self.leak_at_observation and self.leak_weight == 0:
