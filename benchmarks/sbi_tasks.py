@@ -213,7 +213,9 @@ def train_posterior(task, method, budget, cfg, key, x_o, obs_id=None):
             f"    {task.name} {method} {budget} {where}round {state.round}/{rounds}: "
             f"{h['epochs']} epochs (best {h['best_epoch']}), {h['train_s']:.0f} s"
             + (f", posterior {h['box_mass']:.1%} in the box" if "box_mass" in h else "")
-            + (", proposed from the prior" if _fell_back(h) else ""),
+            + (", proposed from the prior" if _fell_back(h) else "")
+            + (f", {h['box_mass_after']:.1%} after" if "box_mass_after" in h else "")
+            + (": round undone" if h.get("reverted") else ""),
             flush=True,
         )
 
