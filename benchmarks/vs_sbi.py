@@ -209,17 +209,33 @@ def main():
     if args.quick:
         args.tasks, args.budgets, args.n_obs, args.num_samples = ["two_moons"], [1_000], 1, 2_000
     cells = [] if args.quick or not os.path.exists(args.out) else json.load(open(args.out))["cells"]
-    for budget in args.budgets:
-        for name in args.tasks:
-            same = [c["task"] == name and c["budget"] == budget for c in cells]
-            if any(same) and not args.force:
-                continue
-            print(f"cell {name} {budget}", flush=True)
-            cell = run_cell(name, budget, args.n_obs, args.num_samples, args.seed)
-            cells = [c for c, s in zip(cells, same) if not s] + [cell]
-            print(table(cells), flush=True)
-            if not args.quick:
-                _save(args.out, cells)
+    todo = [
+        (name, budget)
+        for budget in args.budgets
+        for name in args.tasks
+        if args.force or not any(c["task"] == name and c["budget"] == budget for c in cells)
+    ]
+    if len(todo) > 1:
+        # "cold" means a fresh process: in one process a later cell reuses the earlier cells'
+        # compiled programs (two_moons 10⁴ after 10³: 3.2 s compiling instead of 5.4)
+        for name, budget in todo:
+            _run_alone(args, name, budget)
+        return
+    for name, budget in todo:
+        print(f"cell {name} {budget}", flush=True)
+        cell = run_cell(name, budget, args.n_obs, args.num_samples, args.seed)
+        cells = [c for c in cells if not (c["task"] == name and c["budget"] == budget)] + [cell]
+        print(table(cells), flush=True)
+        if not args.quick:
+            _save(args.out, cells)
+
+
+def _run_alone(args, name: str, budget: int) -> None:
+    """One cell in a fresh process (it reads and rewrites ``args.out`` itself)."""
+    cmd = [sys.executable, os.path.abspath(__file__), "--tasks", name, "--budgets", str(budget)]
+    cmd += ["--n-obs", str(args.n_obs), "--num-samples", str(args.num_samples), "--seed", str(args.seed)]
+    cmd += ["--out", args.out] + (["--force"] if args.force else [])
+    subprocess.run(cmd, check=True)
 
 
 def _save(path, cells):
