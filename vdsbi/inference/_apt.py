@@ -133,7 +133,8 @@ def _run_round(problem: _Problem, state: APTState, r: int, n: int) -> APTState:
         problem, state.flow, r, k_init, k_train, all_theta, all_x, round_ids, is_val, patience
     )
     # fold_in, not a sixth split: the other keys, and so runs without the guard, stay as they were
-    flow, guard_info = _guard_leak(problem, state.flow, flow, info.get("box_mass"), jax.random.fold_in(k_round, 1))
+    k_guard = jax.random.fold_in(k_round, 1)
+    flow, guard_info = _guard_leak(problem, state.flow, flow, info.get("box_mass"), k_guard)
     info.update(fit_info, **guard_info, train_s=time.perf_counter() - t0)
     return APTState(
         round=r + 1,
