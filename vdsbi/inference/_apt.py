@@ -182,7 +182,7 @@ def _guard_leak(
     The atomic loss cannot see mass outside the box with the flow on θ, and the penalty on it
     grows with the squared distance, so a posterior resting on a face can slide across it
     unchecked (gaussian_mixture 10⁵ observation 10, x_o 0.8 from a corner: 92 % in the box after
-    round 8, 40 % after round 9, C2ST 0.592 against 0.510 without any penalty). A round that
+    round 7, 39 % after round 8, C2ST 0.592 against 0.510 without any penalty). A round that
     halves the mass where its own proposal drew cannot have learnt that from its data.
     """
     ratio = problem.config.min_box_mass_ratio
