@@ -1,5 +1,6 @@
 """A recording plus a vehicle as one problem: windows, channels, noise, inputs, initial states, held-out."""
 
+from ._box import Box as Box
 from ._limit import slides as slides
 from ._measured import (
     measured_longitudinal as measured_longitudinal,
