@@ -13,8 +13,8 @@ Measures, in one run, at the seed's maneuver (5 s at 200 Hz, default float32 RK4
   ``vdsbi/simulator/_sharding.py``);
 * the cost of the step size that the wheel dynamics need (2.5 ms vs 5 ms).
 
-Writes benchmarks/results/simulator.json and prints a table. `--quick` runs a tiny version
-(used by the test suite), writing to --out (default: no file).
+Writes benchmarks/results/simulator.json and the table as simulator.md beside it. `--quick` runs
+a tiny version (used by the test suite), writing to --out (default: no file).
 
     .venv/bin/python benchmarks/simulator.py            # full, ~3–5 min on a quiet 2-core box
     .venv/bin/python benchmarks/simulator.py --quick
@@ -405,7 +405,8 @@ def main(argv=None) -> dict:
     if out:
         Path(out).parent.mkdir(parents=True, exist_ok=True)
         Path(out).write_text(json.dumps(result, indent=2) + "\n")
-        print(f"wrote {out}")
+        Path(out).with_suffix(".md").write_text(markdown(result))
+        print(f"wrote {out} and its .md")
     return result
 
 
@@ -437,6 +438,35 @@ def _print_table(r):
         f"load {r['loadavg_start'][0]:.1f} -> {r['loadavg_end'][0]:.1f}"
     )
     print("targets:", r["targets"])
+
+
+def markdown(r) -> str:
+    """The result ``r`` as a Markdown table: wall seconds per batch of N draws, and the baselines."""
+    c = r["config"]
+    rows = [(f"JAX, default ({c['devices']} device(s))", r["seconds"])]
+    rows += [
+        (f"JAX, {d.replace('_', ' ')}", {n: x["seconds"] for n, x in res.items()})
+        for d, res in r["sharded"].items()
+    ]
+    ns = list(r["seconds"])
+    lines = [
+        f"# Simulator throughput ({c['maneuver']}; {c['solver']})",
+        "",
+        f"{c['machine']}, JAX {c['jax']}, {c['device']}; load {r['loadavg_start'][0]:.1f} -> {r['loadavg_end'][0]:.1f}.",
+        "",
+        "| wall s, draws N | " + " | ".join(ns) + " |",
+        "|---" * (len(ns) + 1) + "|",
+        *[
+            "| " + name + " | " + " | ".join(f"{s[n]:.3f}" if n in s else "" for n in ns) + " |"
+            for name, s in rows
+        ],
+        "",
+        f"Compile {r['compile_s']:.1f} s. Speed-up against scipy solve_ivp per draw: {r['speedup_vs_scipy']:.0f}x; "
+        f"against a numpy RK4 vectorised over N = {r['numpy_rk4']['n']}: {r['speedup_vs_numpy_rk4']:.1f}x wall, "
+        f"{r['speedup_vs_numpy_rk4_cpu']:.1f}x CPU.",
+        "",
+    ]
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

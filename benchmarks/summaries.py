@@ -6,8 +6,8 @@ Both estimators are amortized (one NPE round on prior simulations, the same simu
 both), then evaluated on held-out (θ, x) pairs from the prior: per parameter the RMSE of the
 posterior mean, the mean posterior std, the 90 % coverage; SBC ranks with KS p-values and
 expected coverage at 50/80/95 %. Training uses the vehicle's `IdentifySettings` config (the one
-Table II uses) unless options override it. Writes benchmarks/results/summaries.json (+ .md) and
-experiments/results/calibration.json (+ calibration_<embedding>.png).
+Table II uses) unless options override it. Writes benchmarks/results/summaries.json (each
+embedding's SBC KS p-values and coverage under its ``calibration``) and summaries.md.
 """
 
 from __future__ import annotations
@@ -40,29 +40,6 @@ ROOT = Path(__file__).resolve().parent.parent
 LEVELS = (0.5, 0.8, 0.9, 0.95)
 
 
-def plot_calibration(ranks, cov, num_samples, path, title):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    d = ranks.shape[1]
-    fig, axes = plt.subplots(2, d, figsize=(2.6 * d, 5))
-    for j in range(d):
-        axes[0, j].hist(ranks[:, j], bins=10, range=(0, num_samples), color="C0")
-        axes[0, j].axhline(ranks.shape[0] / 10, color="k", ls="--")
-        axes[0, j].set_title(PARAM_NAMES[j], fontsize=9)
-        axes[1, j].plot([0, 1], [0, 1], "k--")
-        axes[1, j].plot(LEVELS, cov[:, j], "o-")
-        axes[1, j].set_xlabel("nominal")
-    axes[0, 0].set_ylabel("SBC rank count")
-    axes[1, 0].set_ylabel("empirical coverage")
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-
-
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true")
@@ -83,9 +60,7 @@ def main(argv=None):
     n_test = args.test or (20 if args.quick else 500)
     n_post = 100 if args.quick else args.posterior_samples
     out_b = ROOT / "benchmarks" / "results"
-    out_e = ROOT / "experiments" / "results"
     out_b.mkdir(parents=True, exist_ok=True)
-    out_e.mkdir(parents=True, exist_ok=True)
 
     vehicle, inputs = default_vehicle(), seed_profile()
     key = jax.random.key(7)
@@ -129,7 +104,6 @@ def main(argv=None):
         "load_average_at_start": os.getloadavg()[0],
         "embeddings": {},
     }
-    calib = {}
     md = [f"# Summaries vs CNN ({n_sims} prior simulations, {int(ok_test.sum())} held-out sets)", ""]
     for emb in args.embeddings.split(","):
         settings = IdentifySettings(
@@ -166,20 +140,13 @@ def main(argv=None):
             "best_epoch": [h["best_epoch"] for h in state.history],
             "wall_s": {"training_incl_simulation": train_s, "sampling": sample_s},
             "units": "l_f, h_cog in m; stiffness in 1e5 N or N/rad",
+            "calibration": {
+                "ks_pvalues": dict(zip(PARAM_NAMES, ks.tolist())),
+                "coverage": {str(lv): dict(zip(PARAM_NAMES, cov[i].tolist())) for i, lv in enumerate(LEVELS)},
+                "num_test": int(ok_test.sum()),
+                "num_posterior_samples": n_post,
+            },
         }
-        calib[emb] = {
-            "ks_pvalues": dict(zip(PARAM_NAMES, ks.tolist())),
-            "coverage": {str(lv): dict(zip(PARAM_NAMES, cov[i].tolist())) for i, lv in enumerate(LEVELS)},
-            "num_test": int(ok_test.sum()),
-            "num_posterior_samples": n_post,
-        }
-        plot_calibration(
-            ranks,
-            cov,
-            n_post,
-            out_e / f"calibration_{emb}{'_quick' if args.quick else ''}{args.tag}.png",
-            f"Amortized NPE ({emb}), {n_sims} sims: SBC ranks and coverage",
-        )
         md += [
             f"## {emb}",
             "",
@@ -210,9 +177,8 @@ def main(argv=None):
     suffix = ("_quick" if args.quick else "") + args.tag
     (out_b / f"summaries{suffix}.json").write_text(json.dumps(results, indent=2))
     (out_b / f"summaries{suffix}.md").write_text("\n".join(md) + "\n")
-    (out_e / f"calibration{suffix}.json").write_text(json.dumps(calib, indent=2))
     print("\n".join(md))
-    return results, calib
+    return results
 
 
 if __name__ == "__main__":
