@@ -20,29 +20,9 @@ when no step is found (a minimum to within the damping), or after `max_steps` ke
 iterations. Written with `lax.while_loop`, so it runs under `jit` and `vmap` (one data set
 per call; under `vmap` every data set iterates until the last one stops, harmlessly).
 
-Why a loop of our own and not `optimistix.LevenbergMarquardt` (optimistix 0.1.0, lineax
-0.1.1): optimistix damps with λ·I, counts rejected trials as steps, and at every trial
-re-linearises and re-materialises the Jacobian for a QR solve, where this loop retries a
-rejected step for one residual evaluation. Measured on real discovery fits (the quick
-concealed-effects sensor-bias recording: one 8 s window, 6 channels, N = 5,526 whitened
-residuals; float64, 5 ms RK4, CPU shared with other jobs; optimistix given the prior as
-extra residual rows, rtol = atol = 1e-8 or 1e-6), seconds per fit after compilation and the
-final cost C:
-
-    candidate (free, our cap)    this kernel              optimistix, cap ×4
-    none (7, 20)                 0.64 s, C = 25,799.2066   12.6 s, C = 25,799.2064 (48 steps)
-    sensor_bias (10, 8)          0.28 s, C = 2,692.9952    5.6 s,  C = 2,692.9952 (26)
-    road_grade (8, 8)            0.16 s, C = 25,787.3798   1.5 s,  C = 25,787.3798 (7)
-    imu_misalignment (9, 8)      0.19 s, C = 19,122.8174   2.2 s,  C = 19,122.8174 (10)
-    steering_lag (8, 8)          0.30 s, C = 25,236.9915   2.6 s,  C = 25,236.9915 (11)
-    imu_lever_arm+sensor_bias    0.47 s, C = 2,692.9281    1.3 s,  C = 2,692.9281 (6)
-      (12, 8)
-
-Both reach the same minimum (to 1e-8 relative); this kernel is 3–20× faster per fit,
-compiles once for every candidate (about 35 s; optimistix, whose vector is the candidate's
-free parameters, 50–80 s per distinct count), and converges within our iteration caps where
-optimistix at the same caps does not (base fit, cap 20: C = 27,575). So the hand-written loop
-stays, once, here.
+A loop of our own rather than `optimistix.LevenbergMarquardt`, because that damps with λ·I and
+re-linearises (a new Jacobian and QR solve) at every rejected trial, where this loop retries a
+rejected step for one residual evaluation and compiles once for every candidate effect.
 """
 
 from __future__ import annotations

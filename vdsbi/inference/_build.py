@@ -84,11 +84,9 @@ def _make_estimator(key, *parts):
     return _make(key, *parts)
 
 
-# XLA's CPU backend at optimisation level 1 (default 2+). Used for the initialisation only: the
-# training steps also compile faster at level 1 and took 88 instead of 124 ms per epoch in one
-# A/B (two_moons 10⁴, s7), but their results are not bit-identical, and over 4 training seeds
-# two_moons 10⁴ scored C2ST 0.554 against 0.544 (benchmarks/results/vs_sbi_variants.jsonl,
-# "affine_s7" vs "affine"): not adopted on that evidence.
+# XLA's CPU backend at optimisation level 1 (default 2+), for the initialisation only: the
+# training steps would compile faster too, but their results would not be bit-identical to the
+# default level's.
 _INIT_CPU_OPTIONS = {"xla_backend_optimization_level": 1}
 
 
@@ -96,8 +94,8 @@ _INIT_CPU_OPTIONS = {"xla_backend_optimization_level": 1}
 def _init_program(backend: str, treedef, leaves: tuple) -> Callable:
     """The compiled initialisation for one static structure of the estimator's parts.
 
-    Cached on the structure (not on a closure, which is new every call): a second fit with the
-    same settings and shapes re-traced and re-compiled it, ~0.6 s per fit (two_moons 10³).
+    Cached on the structure (not on a closure, which is new every call), so a second fit with
+    the same settings and shapes neither re-traces nor re-compiles it.
     """
     static = jax.tree_util.tree_unflatten(treedef, leaves)
 

@@ -30,20 +30,19 @@ class NPEConfig:
             epoch as ``lr·(1 + cos(π·epoch/max_epochs))/2``, so unless stopped early it ends on
             small steps after a fixed budget instead of at a noisy early stop, and counts as
             converged for ``patience_unit="new_data"``. Rounds that continue a trained flow keep
-            the constant rate and early stopping (a 30-epoch cosine there ran round 2 of the
-            vehicle's Table II to its end, 124 s instead of ~45 s).
+            the constant rate and early stopping (a cosine there would run every later round
+            to its end).
         later_max_epochs: opt-in cap for rounds that continue a trained flow, in passes over the
             round's NEW training simulations: ``round(later_max_epochs * new / all)`` epochs, at
             least 2 and at most ``max_epochs``. Such an epoch costs in proportion to all the
-            data so far, so the cap bounds every later round's cost to about the same (the
-            vehicle's Table II, whose later rounds ran 3-20 epochs). None (default): ``max_epochs``.
+            data so far, so the cap bounds every later round's cost to about the same. None
+            (default): ``max_epochs``.
         patience_unit: what ``patience`` counts. ``"epochs"``: epochs over all of a round's
             training data (sbi's rule). ``"new_data"`` (default): examples seen, in passes over
             the round's NEW training simulations, i.e. ``ceil(patience * new / all)`` epochs, at
             least 2; with equal rounds, round ``r`` (from 0) waits ``ceil(patience / (r + 1))``
             epochs. The same as ``"epochs"`` in round 1, for NPE, with ``retrain_from_scratch``
-            and after a round that ran out of ``max_epochs``. APT two_moons at 10⁴, sbibm
-            observation 1: 243 → 65 s, C2ST 0.548 → 0.552 (``benchmarks/results/apt_patience/``).
+            and after a round that ran out of ``max_epochs``.
         average_epochs: 0 (default) or the time constant, in epochs, of an exponential moving
             average of the weights that validation, early stopping and the returned flow use
             (`fit`).
@@ -51,23 +50,22 @@ class NPEConfig:
             differing by initialisation); the posterior is their equal-weight mixture
             (`FlowEnsemble`). 1 (default): a single `ConditionalFlow`.
         validation_fraction: fraction of each round's simulations held out for validation.
-        num_atoms: atoms per example in the APT loss (rounds > 1). Its cost is linear in it; 5
-            ran the sbibm tasks at 10⁴ 1.5-2.7x faster but worse on 14 of 16 observations
-            (``benchmarks/results/apt_atoms/``), so the default stays sbi's 10.
+        num_atoms: atoms per example in the APT loss (rounds > 1); its cost is linear in it.
+            Default: sbi's 10.
         combined_loss: add maximum likelihood on prior draws to the atomic loss.
         leak_weight: weight of `leak_penalty` (one draw per example, the squared distance
             outside the box in box widths) added to the atomic loss; matters only for
             ``theta_map="affine"``, whose mass outside the box the atomic loss cannot see.
             0 (default): off.
         leak_rows: rows of each batch the penalty draws for (evenly strided; 0, the default:
-            every row). The draw costs about as much as the ten atoms' densities (1.67x the
-            step at slcp, batch 512, with every row); a subset estimates the same penalty.
+            every row). The draw costs about as much as the ten atoms' densities; a subset
+            estimates the same penalty.
         leak_at_observation: also penalise the flow's mass outside the box at x_o itself (as
             many draws as ``leak_rows``; `AtomicLoss.leak_at`). False (default): the batch only.
         min_proposal_box_mass: a sequential round whose posterior at x_o has less than this
             share of its mass in the prior box proposes from the prior instead (0, the default:
             never). Below 1 % the rejection sampler repeats draws (under 100·mass of them are
-            distinct); at 1 % the fallback made slcp 10³ observations 3 and 5 worse (s30).
+            distinct).
         min_box_mass_ratio: a sequential round after which the posterior at x_o keeps less than
             this share of the box mass it had before the round is undone: its simulations stay,
             the previous round's flow is kept (0, the default: never). Guards the flow on θ
@@ -88,8 +86,7 @@ class NPEConfig:
         fmpe_hidden, fmpe_num_blocks: width and residual blocks of FMPE's vector field.
         fmpe_ode_steps: fixed Tsit5 steps of FMPE's ODE (sampling and ``log_prob``).
         fmpe_time_power: FMPE training times have density ∝ ``t^fmpe_time_power`` (0: uniform;
-            1, the default, beat 0 on held-out NLL: two_moons 10⁴ −3.70 vs −3.51, slcp 10⁴ 4.95
-            vs 5.33, ``benchmarks/results/fmpe_tuning.jsonl``).
+            1, the default, weights training towards the data end of the path).
     """
 
     num_layers: int = 5

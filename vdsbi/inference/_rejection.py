@@ -17,10 +17,9 @@ def box_rejection(draw: Callable, prior: BoxPrior, key: PRNGKeyArray, n: int) ->
     """``n`` draws of ``draw(key) -> (n, d)`` inside the box, in at most 100 rounds of ``n``.
 
     Slots still empty after that (under 1 % of the mass inside the box) repeat the accepted
-    draws in turn: repeated draws of the right density, where clipping new ones to the box (as
-    before s25) piled them on its faces. APT's flow on slcp's observation 7 (10⁴ simulations)
-    kept 0.6 % of its mass in the box: 10⁴ draws would need 170 rounds. Only if none was
-    accepted are they clipped, so the result always lies in the box.
+    draws in turn: repeated draws of the right density, where clipping new ones to the box
+    would pile them on its faces. Only if none was accepted are they clipped, so the result
+    always lies in the box.
     """
     low, high = prior.low, prior.high
 

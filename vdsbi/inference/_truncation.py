@@ -129,9 +129,7 @@ def _region_threshold(lp: np.ndarray, epsilon: float, widen: float) -> float:
     below the highest ``lp`` is multiplied by ``widen²``, which for a Gaussian posterior is the
     ``1 - ε`` HPD region with every standard deviation times ``widen``, and always a superset.
     A region that cuts the true posterior's tails biases the next round's fit narrower, whose
-    region cuts deeper: gaussian_linear_uniform 10⁴, sbibm observation 3, ended with posterior
-    standard deviations 0.75-1.02 (mean 0.87) of the reference's and 1.3 % of the reference
-    draws outside the final 1 - 10⁻⁴ region (``benchmarks/posterior_spread.py``).
+    region cuts deeper; widening counters that.
     """
     level = float(np.quantile(lp, epsilon))
     top = float(np.max(lp))
@@ -156,7 +154,7 @@ def truncated_prior(
     ``"ellipsoid"`` (both exact; forcing one is for tests). A round that finds fewer than ``n``
     is filled up (``info["num_filled"]``, warned) with draws of the proposal itself: uniform on
     the box, or on the ellipsoid around all the posterior's draws, it is a truncated prior too,
-    only a wider one, so the fit stays unbiased; posterior draws (as before s17) would not.
+    only a wider one, so the fit stays unbiased; posterior draws would not.
     """
     k_ref, k_draw, k_fill = jax.random.split(key, 3)
     ref = np.asarray(_sample(flow, k_ref, x_o, config.truncation_samples))

@@ -20,22 +20,16 @@ from ._prior import BoxPrior
 from ._summaries import summary_statistics
 
 # Round 1 (a fresh flow) runs a fixed cosine schedule, later rounds the constant rate with
-# early stopping. With a constant rate round 1's early stop moved with float rounding (CNN:
-# epoch 39 vs 26 in two Table II runs, 312 vs 287 s, the shorter one a worse posterior), and
-# the amortised posteriors were overconfident: statistics at 40 constant-rate epochs fail SBC
-# on four parameters at 500 held-out sets. The epoch counts are the longest that pass SBC
-# there (CNN 30 and 40 epochs, statistics 40: overconfident; README "calibration").
-#: Training for the statistics' MLP (an epoch costs ~0.5 s).
+# early stopping: with a constant rate round 1's early stop moved with float rounding and left
+# the amortised posterior overconfident. The epoch counts are the longest whose amortised
+# posterior passes SBC (`benchmarks/summaries.py`); longer training is overconfident.
+#: Training for the statistics' MLP.
 STATS_CONFIG = NPEConfig(batch_size=256, learning_rate=1e-3, max_epochs=30, patience=6, lr_schedule="cosine")
-#: Training for the CNN. Later rounds stopped early at varying epochs (Table II: 3-20, 20-76 s a
-#: round); `later_max_epochs` caps each at 30 passes over its new simulations (15, 10, 8, 6
-#: epochs in rounds 2-5 of 5 × 5000), 32-38 s a round as measured with TSNPE (~0.17 ms per
-#: training example and epoch; APT's atomic loss ~0.3), which bounds the whole Table II run
-#: (README "Table II"). `tail_bound` 4 (default 3): beyond the spline interval the flow is the
-#: identity, so base draws past ±3 (~0.3 % a coordinate) escaped the splines' contraction to
-#: TSNPE's narrow posterior and landed near the box edges (Table II seeds 1, 2 with 3: 1.3 %,
-#: 0.5 % of l_f draws far out, std 0.051, 0.031; 0.021, 0.024 with 5). 5 made round 1
-#: overconfident (SBC C_alpha_r p 0.017, 44 % at 50 %); 4 passes (README "calibration").
+#: Training for the CNN. `later_max_epochs` caps each later round at 30 passes over its new
+#: simulations, which bounds the time of a whole sequential run. `tail_bound` 4 (default 3):
+#: beyond the spline interval the flow is the identity, so base draws past ±3 escape the
+#: splines' contraction to TSNPE's narrow posterior and land near the box edges; a wider
+#: interval (5) leaves round 1 overconfident under SBC.
 CNN_CONFIG = NPEConfig(
     batch_size=256,
     learning_rate=1e-3,
@@ -59,11 +53,9 @@ class IdentifySettings:
         embed_dim: embedding size.
         num_samples: posterior samples to return.
         truncate: TSNPE (default): later rounds draw from the prior truncated to the current
-            posterior's highest-density region and train by maximum likelihood; False: APT's
-            posterior proposals and atomic loss. On Table II (seed 0, CNN) the atomic loss left
-            87 % of the final posterior in a spurious mode (l_f ≈ 1.16 with h_cog pinned at
-            0.206 ± 0.005 by the box edge; its simulations fit the observation worse than the
-            minority mode at the truth), l_f std 0.133; TSNPE: one mode, l_f 1.492 ± 0.027.
+            posterior's highest-density region and train by maximum likelihood (Deistler et
+            al. 2022); False: APT's posterior proposals and atomic loss (Greenberg et al. 2019),
+            which on the seed's maneuver can leave much of the posterior in a spurious mode.
         config: flow and training hyperparameters (default: `CNN_CONFIG` or `STATS_CONFIG`
             for the embedding); its ``x_standardize`` is overridden by `npe_config` for the CNN
             (see there). Later rounds wait ``ceil(patience · new/all)`` epochs
@@ -82,8 +74,7 @@ class IdentifySettings:
     def npe_config(self) -> NPEConfig:
         """`config`, with the CNN's raw trajectories standardised as deviations from the mean
         simulated trajectory: all simulations share the recording's inputs, and per-channel
-        scaling alone buries small θ-driven differences under the manoeuvre's own variation
-        (benchmarks/summaries.py: C_kappa_f RMSE 0.22 with per-channel, 0.067 with this)."""
+        scaling alone buries small θ-driven differences under the manoeuvre's own variation."""
         if self.embedding == "cnn":
             return dataclasses.replace(self.config, x_standardize="trajectory")
         return self.config

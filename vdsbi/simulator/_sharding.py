@@ -3,12 +3,10 @@
 On a CPU, JAX gives one device by default and XLA runs a vmapped simulation on one core, so a
 batch of draws would leave the other cores idle. When this module is imported before JAX has
 started, vdsbi asks JAX for one CPU device per core (at most ``MAX_CPU_DEVICES``) through JAX's
-own option ``jax_num_cpu_devices``, and batches of draws are split over them (5000 draws × 5 s:
-1.21 s on one device, 0.60 s on two; ``benchmarks/simulator.py``, s23). ``VDSBI_CPU_DEVICES=N`` sizes
-it and ``=1`` turns it off. Training keeps to the first CPU device (see
-`vdsbi.inference.data_mesh`), and with JAX 0.10 a process with two CPU devices trains as fast
-as one with one (s23: the same s per epoch in `experiments/paper_table2.py`). The setting is
-skipped if the user already chose (``jax_num_cpu_devices`` set, or
+own option ``jax_num_cpu_devices``, and batches of draws are split over them
+(``benchmarks/simulator.py`` measures the gain). ``VDSBI_CPU_DEVICES=N`` sizes it and ``=1``
+turns it off. Training keeps to the first CPU device (see `vdsbi.inference.data_mesh`). The
+setting is skipped if the user already chose (``jax_num_cpu_devices`` set, or
 ``--xla_force_host_platform_device_count`` in ``XLA_FLAGS``) or JAX already ran something.
 """
 
