@@ -70,8 +70,8 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 
 #: ``--methods fmpe``: the flow-matching estimator, amortised like NPE (one network per task and
 #: budget, prior simulations only) and so held against sbibm's NPE figures. Settings chosen on
-#: the held-out NLL of fresh simulations (two_moons 10⁴, ``benchmarks/fmpe_tuning.py``,
-#: ``results/fmpe_tuning.jsonl``), never on reference posteriors; the full cosine course runs.
+#: the held-out NLL of fresh simulations, never on reference posteriors; the full cosine course
+#: runs.
 FMPE = {"estimator": "fmpe", "batch_size": 256, "learning_rate": 2e-3, "lr_schedule": "cosine"}
 FMPE.update(max_epochs=400, patience=400)
 #: APT's penalty on the flow's mass outside the box (why: `config_for`).
@@ -85,46 +85,22 @@ SEQUENTIAL = ("apt", "tsnpe")
 def config_for(budget: int, method: str = "npe", **overrides) -> NPEConfig:
     """The benchmark's settings at ``budget`` for ``method`` (``overrides``: other `NPEConfig` fields).
 
-    ``theta_map="affine"`` (the flow on θ, as sbi): two_moons 10⁴, 4 training seeds, C2ST
-    0.580 → 0.544 with every seed and observation better (``vs_sbi_variants.py``). The
-    library's default stays ``"logit"`` (vehicle identification relies on it).
+    ``theta_map="affine"`` (the flow on θ, as sbi): on two_moons it scored better than the
+    library's default ``"logit"``, which vehicle identification keeps.
 
     TSNPE, and APT at 10³, count their patience in epochs, as sbi's SNPE-C (the method sbibm's
-    SNPE figures come from). The library's default scales a continued round's patience by its
-    share of new data, which at 10 rounds x 100 left round 10 two epochs and scored two_moons
-    10³ 0.739 ± 0.041 against 0.633 ± 0.058 with epochs (sbibm observations 1-10, same seeds; 7
-    vs 24 s per observation). Without weight averaging it also scored worse at 10⁴ (3-4 times
-    faster; ``results/apt_patience/``). With averaging, APT at 10⁴ keeps the default: on sbibm
-    observations 1-3 gaussian_linear_uniform scored the same (0.532/0.537/0.542) in 57-99 s
-    instead of 236 s, two_moons 0.526/0.526/0.538 against 0.498/0.517/0.525 in 51-84 s
-    instead of 226 s (``results/apt_patience/ema_new_data.json``). Over 10 observations it
-    costs accuracy on the other tasks (two_moons 0.524 → 0.545, gaussian_mixture 0.530 → 0.570;
-    still below sbibm's SNPE) for ≤ 2 min per observation instead of 197-261 s.
+    SNPE figures come from): the library's default scales a continued round's patience by its
+    share of new data, which at 10 rounds × 100 leaves the last rounds two epochs. APT at 10⁴
+    and above keeps the default, which with weight averaging bounds a round's time.
 
-    NPE and APT average their weights over one epoch (``average_epochs=1``): on two_moons 10⁵
-    the unaveraged NPE stopped on validation noise at 60 epochs (0.548 ± 0.036, 10 observations)
-    and the averaged one at 240 (0.513 ± 0.019); gaussian_linear_uniform 10⁴ 0.566 → 0.551 and
-    10⁵ 0.518 → 0.509 on observations 1-3 (``results/ema/``). APT at 10⁴, observations 1-3
-    (``results/apt_ema/``): gaussian_linear_uniform 0.575 → 0.537, two_moons 0.541 → 0.513 (its
-    later rounds no longer stop on the atomic loss's SGD noise within a few epochs; the average
-    adds nothing to a step's cost, ``train_profile.py --steps``). TSNPE at 10⁴ did not change
-    (0.554/0.553 either way): it keeps the library's default (off).
+    NPE and APT average their weights over one epoch (``average_epochs=1``), so that early
+    stopping does not stop on validation noise; TSNPE keeps the library's default (off).
 
     APT penalises the flow's mass outside the box (``leak_weight=10`` on 64 strided rows of
-    each batch, s27): the atomic loss cannot see that mass with the flow on θ, and at 10⁵ it
-    failed at 3 of 30 observations (slcp 7 and 8, gaussian_linear_uniform 3: 0.918, 0.971,
-    0.610; with the penalty 0.691, 0.684, 0.519). At 10³ and 10⁴ (all 10 observations,
-    ``results/apt_variants/leak_grid.json``) it changed seven cells within noise and slcp 10⁴
-    for the worse (0.798 → 0.814, still under sbibm's 0.845: where the posterior rests on the
-    box it pulls the flow in from the face), and took 14-45 % longer to train. sbi's combined
-    loss instead (``combined_loss=True``, s28, ``results/apt_variants/combined_grid.json``) was
-    worse on slcp at 10³ (0.957 → 0.971, a miss) and 10⁴ (0.814 → 0.835), better on two_moons
-    10⁴ (0.544 → 0.531). The penalty at x_o as well (``leak_at_observation=True``, s31,
-    ``results/apt_variants/leak_at_xo.json``) turned slcp 10⁵ observation 4's leak (1.000) into
-    0.636 (observations 2, 3 and 7: 0.592, 0.650, 0.695 against 0.577, 0.626, 0.701) and
-    scored the slcp 10⁵ cell 0.620 ± 0.041 over 10 observations (sbibm 0.666; 0.690 ± 0.162 over six
-    without it, one failure), so APT uses it at 10⁵ (s32); left off below: slcp 10³ 0.966 (a miss,
-    against 0.957) and 10⁴ 0.811 (0.814) at 14 % more time.
+    each batch): with the flow on θ the atomic loss compares densities only at atoms inside
+    the box, so the mass outside drifts unseen and at 10⁵ can leak away. At 10⁵ it also
+    penalises that mass at x_o itself (``leak_at_observation=True``), since the batch penalty
+    draws only at the training batch's contexts.
     """
     base = NPEConfig(
         batch_size=128 if budget <= 10_000 else 512,

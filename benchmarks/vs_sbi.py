@@ -15,22 +15,17 @@ wall time (ours includes JIT compilation in a fresh process, no persistent compi
 ``ours_compile_s`` is the part of it spent tracing, lowering and compiling, from JAX's
 monitoring events); ``ours_warm_train_s`` is the same training repeated at once in the same
 process (same data and seed, so the same flow, its programs already compiled: what a second
-fit of the same shapes costs, e.g. the next drive or task in one session). The target is
-judged on the cold time; sampling and C2ST are not timed. Each cell records the 1-minute load average
+fit of the same shapes costs, e.g. the next drive or task in the same process). The target
+is judged on the cold time; sampling and C2ST are not timed. Each cell records the 1-minute load average
 before each side's training and the commit. ``--force`` re-runs named cells (sbi's side too:
 its time varies with the machine's load, so both sides run in the same process, back to back).
 
 Ours runs the grid's NPE settings without the weight averaging (``OURS``): averaging over one
-epoch lets training run on (two_moons 10⁴ in the grid: 14 → 37 s, C2ST 0.573 → 0.538), and this
-table is about speed at sbi's accuracy, which ours reaches without it in every cell.
-
-Ours uses ``theta_map="affine"`` (the flow on θ, as sbi) since the s6 session; the table with the
-library's default logit map is kept in ``benchmarks/results/vs_sbi_logit.{json,md}`` and the
-seed-to-seed screening behind the change in ``vs_sbi_variants.jsonl``.
+epoch lets training run on, and this table is about speed at sbi's accuracy. Ours uses
+``theta_map="affine"`` (the flow on θ, as sbi).
 
 Writes ``benchmarks/results/vs_sbi.json`` after every cell (finished cells are skipped on a
-re-run), and the table to ``benchmarks/results/vs_sbi.md``. The cells before the s7 speed work
-(commit 54b14e0^) are kept in ``benchmarks/results/vs_sbi_s6.{json,md}``.
+re-run), and the table to ``benchmarks/results/vs_sbi.md``.
 """
 
 import argparse
@@ -217,7 +212,7 @@ def main():
     ]
     if len(todo) > 1:
         # "cold" means a fresh process: in one process a later cell reuses the earlier cells'
-        # compiled programs (s35, two_moons 10⁴ after 10³: 3.2 s compiling; alone 8.5 s)
+        # compiled programs
         for name, budget in todo:
             _run_alone(args, name, budget)
         return

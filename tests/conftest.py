@@ -1,13 +1,12 @@
 import itertools
 import os
 
-# The suite is compile-bound: XLA compiling took 1482 of its 2042 CPU seconds (s18, per-test
-# compile events). LLVM at -O0 compiles ~40 % faster and runs slower, a net gain here; results
-# move only by float32 rounding (a process stays deterministic), which no test may rely on since
-# another CPU rounds differently too. Users, benchmarks and experiments keep XLA's default level.
-# The tests also compile as the `vdsbi` command does, with XLA's older loop emitters (~1/3 less
-# compile again: tests/test_design.py 51 -> 34 s at -O0, s20). Subprocesses inherit the flags;
-# name one in XLA_FLAGS yourself to test with another value.
+# The suite is compile-bound: most of its CPU time is XLA compiling. LLVM at -O0 compiles
+# faster and runs slower, a net gain here; results move only by float32 rounding (a process
+# stays deterministic), which no test may rely on since another CPU rounds differently too.
+# Users, benchmarks and experiments keep XLA's default level. The tests also compile as the
+# `vdsbi` command does, with XLA's older loop emitters (less compile again). Subprocesses
+# inherit the flags; name one in XLA_FLAGS yourself to test with another value.
 from vdsbi.cli._main import CLI_XLA_FLAGS, xla_flags  # noqa: E402  (no backend started yet)
 
 os.environ["XLA_FLAGS"] = xla_flags(os.environ, {**CLI_XLA_FLAGS, "xla_backend_optimization_level": "0"})
@@ -72,9 +71,9 @@ def tree_allclose(a, b, rtol=1e-5, atol=1e-8) -> bool:
 __all__ = ["tree_allclose", "jnp"]
 
 
-# No persistent XLA compilation cache: on a run at 814d410 a worker segfaulted inside JAX's
-# cache write (`executable.serialize()`, test_discovery_terms), a native crash no test can catch;
-# a clean CI checkout starts with an empty cache anyway, so it bought little there.
+# No persistent XLA compilation cache: a worker can segfault inside JAX's cache write
+# (`executable.serialize()`), a native crash no test can catch; a clean CI checkout starts
+# with an empty cache anyway, so it buys little there.
 
 
 @pytest.fixture(autouse=True)

@@ -432,7 +432,7 @@ def test_ensemble_members_are_trained_independently_at_once(getkey):
 
 
 def test_eval_steps_ignores_padding_batches(getkey):
-    # padding batches (live=False; skipped since s7) cannot change the validation loss
+    # padding batches (live=False, skipped) cannot change the validation loss
     from vdsbi.inference import eval_steps
 
     theta, x, flow, _ = _tiny_problem(getkey, 128)

@@ -109,10 +109,9 @@ def _init_compiled(key: PRNGKeyArray, parts: tuple):
     """``_make_estimator(key, *parts)`` as one compiled program (on the CPU at XLA optimisation
     level 1), compiled once per static structure of ``parts``.
 
-    Built op by op, the initialisation compiled dozens of small kernels (~2-5 s of a
-    10⁴-simulation NPE run); as one program at the CPU's default level its threefry draws
-    still took ~1.5 s to compile for a program that runs once. Level 1 gives the same weights
-    bit for bit in about half the time (``benchmarks/results/train_profile.md``).
+    Built op by op, the initialisation would compile dozens of small kernels; as one program
+    at the CPU's default level its random draws are slow to compile for a program that runs
+    once. Level 1 gives the same weights bit for bit, compiled faster.
     """
     dynamic, static = eqx.partition(parts, eqx.is_array)
     leaves, treedef = jax.tree_util.tree_flatten(static)
