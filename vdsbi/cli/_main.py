@@ -71,10 +71,9 @@ def compilation_cache_dir(environ=os.environ) -> Path | None:
 
 def _use_compilation_cache(folder: Path | None) -> None:
     """Keep compiled programs in ``folder`` across runs: most of a small run is XLA compiling the
-    simulator and the flow for the drive's shapes (the demo test's small loop: 93 s with none
-    kept, 49 s with its programs kept), which a resumed or repeated `identify` reuses. These are
-    process-wide JAX settings, so only the command's own process sets them (`entry`), never the
-    library or `main`."""
+    simulator and the flow for the drive's shapes, which a resumed or repeated `identify`
+    reuses. These are process-wide JAX settings, so only the command's own process sets them
+    (`entry`), never the library or `main`."""
     if folder is None:
         return
     import jax
@@ -84,8 +83,7 @@ def _use_compilation_cache(folder: Path | None) -> None:
 
 
 #: XLA flags the `vdsbi` command adds unless the user's ``XLA_FLAGS`` names them: XLA:CPU's older
-#: loop emitters compiled faster and ran no slower in every A/B measured (README, "Using it on
-#: your own drive"); results move by float32 rounding only.
+#: loop emitters compile faster and run no slower; results move by float32 rounding only.
 CLI_XLA_FLAGS = {"xla_cpu_use_fusion_emitters": "false"}
 
 

@@ -1,9 +1,8 @@
 """tan and arctan that XLA vectorises on a CPU.
 
 XLA:CPU lowers `tan` and `atan` to per-element library calls, and in the batched vector field
-they cost more than the rest of it together: 5000 draws × 5 s took 1.7 s with them and 0.87 s
-with these (benchmarks/simulator.py). `sin`/`cos` and polynomials vectorise. In float64 (the
-discovery's least squares, the precision tests) the library functions are kept as they are.
+they cost more than the rest of it together. `sin`/`cos` and polynomials vectorise. In
+float64 (the discovery's least squares, the precision tests) the library functions are kept.
 """
 
 from __future__ import annotations

@@ -5,10 +5,9 @@ program it compiled for as long as the function it was compiled for lives (modul
 functions: for the life of the process). A process that compiles many programs — the test
 suite in one pytest worker, a benchmark grid, a diagnosis that identifies one candidate model
 after another — runs into Linux's ``vm.max_map_count`` (65 530 by default), and the next
-compilation dies with a segmentation fault or an abort, which nothing in Python can catch
-(measured: the quick Table II run alone leaves ~5 400 mappings; one pytest worker reached the
-limit after 275 tests). `release_compiled_programs` drops JAX's compiled programs when the
-process has used more than a fraction of the limit; they are recompiled when next needed.
+compilation dies with a segmentation fault or an abort, which nothing in Python can catch.
+`release_compiled_programs` drops JAX's compiled programs when the process has used more than
+a fraction of the limit; they are recompiled when next needed.
 """
 
 from __future__ import annotations
