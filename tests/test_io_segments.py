@@ -66,5 +66,5 @@ def test_real_recordings_segments_and_noise(name, min_usable):
     assert sum(b - a for a, b in segs) > min_usable
     assert all(rec.channels["vx"][(rec.t >= a) & (rec.t <= b)].mean() > 5.0 for a, b in segs)
     noise = estimate_noise_std(rec, segments=segs)
-    assert noise["ay"] > 1.0  # the README's "several m/s² of vibration"
+    assert noise["ay"] > 1.0  # an IMU carries several m/s² of vibration
     assert noise["yaw_rate"] < 0.05 and noise["vx"] < 0.05

@@ -118,7 +118,7 @@ def test_identify_settings_train_each_embedding_by_its_own_default():
     assert cnn.npe_config.x_standardize == "trajectory"
     # the CNN's later rounds are capped (bounded Table II time); the cheap statistics' are not
     assert cnn.config.later_max_epochs is not None and stats.config.later_max_epochs is None
-    assert cnn.truncate and stats.truncate  # TSNPE, not the atomic loss (README "Table II")
+    assert cnn.truncate and stats.truncate  # TSNPE, not the atomic loss (experiments/paper_table2.py)
     # the CNN's spline interval is wider than the default: base draws past ±3 escaped to the box edges
     assert cnn.config.tail_bound > NPEConfig().tail_bound
     mine = NPEConfig(max_epochs=7)
