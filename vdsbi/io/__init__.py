@@ -32,4 +32,9 @@ from ._segments import (
     label_runs as label_runs,
     usable_segments as usable_segments,
 )
+from ._speed import (
+    SpeedEstimate as SpeedEstimate,
+    estimate_speed as estimate_speed,
+    forward_speed as forward_speed,
+)
 from ._vehicle_file import read_vehicle as read_vehicle

@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 
 from ._recording import Recording
+from ._speed import forward_speed
 
 #: Wheel radius, m, used to turn wheel speeds into a speed when neither vx nor a radius is given.
 FALLBACK_WHEEL_RADIUS = 0.31
@@ -54,7 +55,8 @@ def find_segments(
 ) -> list[Segment]:
     """Split a recording into usable and rejected stretches, covering all of it in time order.
 
-    A sample is usable where the speed (vx, else mean wheel speed × `wheel_radius`), averaged
+    A sample is usable where the speed (`forward_speed`: vx, else mean wheel speed ×
+    `wheel_radius`, else the estimate from ax and ay ≈ v_x·r), averaged
     over 0.5 s, is at least `min_speed` (the tire-slip model is singular near standstill) and
     the inputs excite the dynamics: over a centred `window` the steering std is at least
     `min_steer_std` or the total axle torque std at least `min_torque_std` (without torques,
@@ -70,9 +72,9 @@ def find_segments(
         Segments with reasons like "speed below 5 m/s" or "no excitation".
     """
     t = rec.t
-    speed = rec.speed(wheel_radius if wheel_radius is not None else FALLBACK_WHEEL_RADIUS)
+    speed = forward_speed(rec, wheel_radius if wheel_radius is not None else FALLBACK_WHEEL_RADIUS)
     if speed is None:
-        return [Segment(float(t[0]), float(t[-1]), False, "no speed: neither vx nor wheel speeds")]
+        return [Segment(float(t[0]), float(t[-1]), False, "no speed: no vx, wheel speeds or estimate")]
     n_speed = max(1, int(round(0.5 * rec.rate)))
     n_win = max(2, int(round(window * rec.rate)))
     fast = _rolling(speed, n_speed, "mean") >= min_speed

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..io import Recording, label_runs
+from ..io import Recording, forward_speed, label_runs
 from ..simulator import GRAVITY
 from ._measured import running_mean
 
@@ -32,14 +32,14 @@ def slides(rec: Recording, *, wheel_radius: float, friction: float) -> list[tupl
     """Stretches [t0, t1] of `rec` at the limit (a slide caught by counter-steer), with a reason.
 
     Args:
-        rec: the recording (needs yaw_rate, else ay, and a speed).
+        rec: the recording (needs yaw_rate, else ay, and a speed: `forward_speed`).
         wheel_radius: for a speed from wheel speeds.
         friction: vehicle.json's μ (scales the cornering demand that counts).
 
     Returns:
         [(t0, t1, reason)] in time order, margins included, clipped to the recording.
     """
-    speed = rec.speed(wheel_radius)
+    speed = forward_speed(rec, wheel_radius)
     if speed is None:
         return []
     n = max(1, int(round(SMOOTHING * rec.rate)))

@@ -17,7 +17,13 @@ import numpy as np
 from ..io import InputError, Recording
 from ..simulator import CHANNELS, GRAVITY, Decimator, Inputs, Vehicle
 from ._limit import slides
-from ._measured import TORQUE_SPEED_TOLERANCE, measured_longitudinal, smoothed_yaw_rate, torque_speed_error
+from ._measured import (
+    TORQUE_SPEED_TOLERANCE,
+    longitudinal_arrays,
+    smoothed_yaw_rate,
+    start_speed,
+    torque_speed_error,
+)
 from ._noise import raw_noise_std
 from ._windows import Window, choose_windows
 
@@ -301,7 +307,7 @@ def _window_arrays(rec: Recording, windows: Sequence[Window], mode: str, vehicle
     n_max = max(i1 - i0 for i0, i1 in idx)
     torques = (rec.torque_front, rec.torque_rear) if rec.has_torques else (np.zeros_like(rec.t),) * 2
     u_all = np.stack([rec.steer, *torques], -1)
-    speed_all, accel_all = measured_longitudinal(rec, vehicle.wheel_radius)
+    speed_all, accel_all = longitudinal_arrays(rec, vehicle.wheel_radius, mode)
     yaw_all = smoothed_yaw_rate(rec)
 
     def padded(a, i0, i1):
@@ -369,6 +375,8 @@ def make_problem(rec: Recording, vehicle: Vehicle, settings: ProblemSettings = P
     channels = _channels(rec, mode, settings)
     if settings.segment is not None:
         rec = _restrict(rec, settings.segment)
+    # Torque mode needs a speed at each window start only: measured, else estimated.
+    speed_note = start_speed(rec, vehicle.wheel_radius)[1] if mode == "torque" else None
     windows, described = choose_windows(
         rec,
         wheel_radius=vehicle.wheel_radius,
@@ -389,6 +397,9 @@ def make_problem(rec: Recording, vehicle: Vehicle, settings: ProblemSettings = P
     segments = [(w.t0, w.t1) for w in windows]
     sigma_raw, source = raw_noise_std(rec, vehicle, channels, segments)
     warnings = list(rec.warnings) + _torque_warning(rec, vehicle, mode, segments)
+    if speed_note is not None:
+        warnings.append(f"{rec.source}: vx: {speed_note}")
+        described = {**described, "initial_speed": speed_note}
     gain = 1.0 if decimator is None else float(np.sqrt(np.sum(np.asarray(decimator.taps) ** 2)))
     return Problem(
         source=rec.source,

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..io import Recording, find_segments
+from ..io import Recording, find_segments, forward_speed
 from ._limit import subtract
 from ._measured import running_mean
 
@@ -59,7 +59,7 @@ def lateral_activity(rec: Recording, wheel_radius: float) -> np.ndarray | None:
     parts = []
     if "ay" in rec.channels:
         parts.append(np.abs(smooth(rec.channels["ay"])))
-    speed = rec.speed(wheel_radius)
+    speed = forward_speed(rec, wheel_radius)
     if "yaw_rate" in rec.channels and speed is not None:
         parts.append(np.abs(smooth(rec.channels["yaw_rate"] * speed)))
     return np.maximum.reduce(parts) if parts else None
