@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vdsbi.api import pairplot
+from vdsbi.api.plots import pairplot
 from vdsbi.inference import TRACE_COUNTS, IdentifySettings, Posterior, identify, observation, seed_prior
 from vdsbi.simulator import (
     NOMINAL_THETA,

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from vdsbi import api
+from vdsbi.api._validate import PROFILE_V0
 from vdsbi.inference import IdentifySettings, identify, seed_prior
 from vdsbi.io import InputError, read_recording
 from vdsbi.io._errors import SimulationError
@@ -67,19 +68,19 @@ def test_api_identify_turns_failed_simulations_into_one_line_and_cleans_up(monke
 def test_checkpoint_dir_keeps_a_checkpointed_run_and_drops_an_empty_one(tmp_path):
     out = tmp_path / "run"
     with pytest.raises(RuntimeError):
-        with api.checkpoint_dir(out) as d:
-            (d / api.RUN_FILE).write_text("{}")
+        with api.outputs.checkpoint_dir(out) as d:
+            (d / api.outputs.RUN_FILE).write_text("{}")
             raise RuntimeError("killed before the first checkpoint")
     assert not out.exists()
     with pytest.raises(KeyboardInterrupt):
-        with api.checkpoint_dir(out) as d:
-            (d / api.CHECKPOINT).write_bytes(b"round 1")
+        with api.outputs.checkpoint_dir(out) as d:
+            (d / api.outputs.CHECKPOINT).write_bytes(b"round 1")
             raise KeyboardInterrupt
-    assert (out / api.CHECKPOINT).exists()
+    assert (out / api.outputs.CHECKPOINT).exists()
     with pytest.raises(InputError, match="not empty; use --resume"):
-        with api.checkpoint_dir(out):
+        with api.outputs.checkpoint_dir(out):
             pass
-    with api.checkpoint_dir(out, resume=True) as d:
+    with api.outputs.checkpoint_dir(out, resume=True) as d:
         assert d == out
 
 
@@ -106,7 +107,7 @@ def test_simulate_gives_a_recording_with_the_given_inputs(tmp_path):
 
 def test_observability_result_renders_and_saves(tmp_path):
     res = api.observability(default_vehicle(), seed_profile(duration=1.0), label="seed profile, 1 s")
-    assert res.report["params"] == list(PARAM_NAMES) and res.report["v0"] == api.PROFILE_V0
+    assert res.report["params"] == list(PARAM_NAMES) and res.report["v0"] == PROFILE_V0
     assert res.markdown().startswith("# Observability: seed profile, 1 s, v0 = 10.5 m/s, seed noise")
     res.save(tmp_path)
     assert json.loads((tmp_path / "fisher.json").read_text())["maneuver"] == "seed profile, 1 s"

@@ -4,8 +4,7 @@ prior box."""
 import numpy as np
 import pytest
 
-from vdsbi.api import display_unit, pairplot
-from vdsbi.api._plots import _mass_levels
+from vdsbi.api.plots import _mass_levels, display_unit, pairplot
 
 
 def test_stiffness_reads_in_kilonewtons():

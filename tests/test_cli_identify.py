@@ -67,7 +67,7 @@ def full_run(drive, tmp_path_factory) -> Path:
 
 
 def test_identify_writes_all_files(full_run):
-    for name in ("posterior.json", "samples.csv", "pairplot.png", "ppc.png", api.ESTIMATOR):
+    for name in ("posterior.json", "samples.csv", "pairplot.png", "ppc.png", api.outputs.ESTIMATOR):
         assert (full_run / name).stat().st_size > 0, name
     post = json.loads((full_run / "posterior.json").read_text())
     assert set(post["parameters"]) == set(PARAM_NAMES)
@@ -115,7 +115,7 @@ def test_sample_reloads_in_new_process(full_run, tmp_path):
     df = pd.read_csv(io.StringIO(text))
     assert list(df.columns) == list(PARAM_NAMES) and len(df) == 50
     # The same draws as this process gets from the saved estimator with the same key.
-    here = np.asarray(Posterior.load(full_run / api.ESTIMATOR).sample(jax.random.key(3), 50))
+    here = np.asarray(Posterior.load(full_run / api.outputs.ESTIMATOR).sample(jax.random.key(3), 50))
     np.testing.assert_allclose(df.to_numpy(), here, rtol=1e-6)
     # --out writes the same thing; another seed gives other draws.
     assert main(["sample", str(full_run), "--n", "50", "--seed", "3", "--out", str(tmp_path / "s.csv")]) == 0
@@ -196,7 +196,7 @@ def test_interrupted_run_resumes_to_identical_result(drive, full_run, tmp_path):
             on_round_end=interrupt,
         )
     # Interrupted after round 1: only the checkpoint and the run settings are there.
-    assert sorted(p.name for p in out.iterdir()) == [api.CHECKPOINT, api.RUN_FILE]
+    assert sorted(p.name for p in out.iterdir()) == [api.outputs.CHECKPOINT, api.outputs.RUN_FILE]
     # Without --resume the directory is refused (exit 2), and left as it was.
     args = ["identify", str(rec), "--vehicle", str(veh), "--out", str(out), *BUDGET, "--quiet"]
     assert main(args) == 2

@@ -12,11 +12,12 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from ..io import output_dir
 from ._diagnose import diagnose
 from ._identify import IdentifyResult, identify
-from ._outputs import output_dir, plot_posterior
 from ._pages import demo_page
-from ._plots import before_after_plot
+from .outputs import plot_posterior
+from .plots import before_after_plot
 
 #: The effect hidden in the demo recording (identify's model does not know it).
 CONCEALED = {"sensor_bias": {"ax": 0.3, "ay": -0.25, "yaw_rate": 0.0}}

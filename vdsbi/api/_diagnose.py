@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from pathlib import Path
 from typing import Any
@@ -36,9 +37,8 @@ def diagnose(
     )
     if rec is None:
         rec = found.report["source"]
-    found.report["identify_command"] = identify_command(
-        rec, veh, out, found.report["chosen"], options.get("longitudinal", "auto")
-    )
+    command = identify_command(rec, veh, out, found.report["chosen"], options.get("longitudinal", "auto"))
+    found = dataclasses.replace(found, report={**found.report, "identify_command": command})
     if out_dir is not None:
         plots = options.get("plots", getattr(options.get("settings"), "plots", True))
         write_report(found, Path(out_dir), plots=plots)

@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Any
 
 from ..io import InputError
-from ._outputs import write_text_atomically
 
 EXPORT_FORMATS = ("autoware", "json", "csv")
 #: What each format's file is called.
@@ -162,11 +161,3 @@ def autoware(post: Mapping[str, Any], vehicle: Mapping[str, Any] | None, run_dir
 
 def _interval(p: Mapping[str, Any], f: str) -> str:
     return f"{p['mean']:{f}} [{p['q05']:{f}}, {p['q95']:{f}}]"
-
-
-def write_export(run_dir: str | os.PathLike, fmt: str, out: str | os.PathLike | None = None, **kw) -> Path:
-    """`export` written to `out` (default: `run_dir`/FILE_NAMES[fmt]); the path written."""
-    text = export(run_dir, fmt, **kw)
-    path = Path(out) if out is not None else Path(run_dir) / FILE_NAMES[fmt]
-    write_text_atomically(path, text)
-    return path

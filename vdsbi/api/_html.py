@@ -21,7 +21,6 @@ code, pre { background: #f5f5f5; padding: 0.1em 0.3em; }
 pre { padding: 0.6em; overflow-x: auto; }
 figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #ddd; }
 figcaption { font-size: 0.9em; color: #555; }
-.side { display: flex; gap: 1em; } .side figure { flex: 1; }
 """
 
 
@@ -59,10 +58,6 @@ def figure(path: str | os.PathLike, caption: str) -> str:
         f'<figure><img alt="{esc(path.name)}" src="data:image/png;base64,{data}">'
         f"<figcaption>{esc(caption)}</figcaption></figure>"
     )
-
-
-def side_by_side(*figures: str) -> str:
-    return '<div class="side">' + "".join(figures) + "</div>"
 
 
 def links(folder: str | os.PathLike, names: Sequence[str], also: Sequence[str | os.PathLike] = ()) -> str:

@@ -31,7 +31,7 @@ from ..problem import (
 )
 from ..simulator import release_compiled_programs
 from ._commands import diagnose_command
-from ._outputs import (
+from .outputs import (
     CHECKPOINT,
     ESTIMATOR,
     RUN_FILE,

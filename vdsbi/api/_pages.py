@@ -9,7 +9,7 @@ from typing import Any
 
 from ..simulator import PARAM_UNITS
 from . import _html as H
-from ._plots import display_unit
+from .plots import display_unit
 
 #: Files `identify` leaves beside its page.
 IDENTIFY_FILES = ("posterior.json", "samples.csv", "run.json", "estimator.npz", "pairplot.png", "ppc.png")

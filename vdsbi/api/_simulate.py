@@ -11,7 +11,7 @@ import numpy as np
 from ..io import InputError, Recording
 from ..problem import longitudinal_mode, measured_longitudinal, smoothed_yaw_rate
 from ..simulator import CHANNELS, Inputs, Vehicle
-from ._validate import checked_theta, checked_v0, first_speed, load_vehicle
+from ._validate import PROFILE_V0, checked_theta, checked_v0, first_speed, load_vehicle
 
 
 @dataclasses.dataclass
@@ -64,7 +64,7 @@ class SimulateResult:
 
 def simulate(
     theta: Mapping[str, float] | Sequence[float] | np.ndarray,
-    inputs: Inputs | Recording,
+    inputs: Inputs | Recording | None,
     vehicle: str | os.PathLike | Vehicle | None = None,
     *,
     v0: float | None = 10.0,
@@ -78,8 +78,9 @@ def simulate(
 
     Args:
         theta: (6,) array or {name: value}; missing names take the seed's Table II values.
-        inputs: an `Inputs` profile, or a `Recording` whose steer and torques drive the model.
-        v0: initial speed, m/s; None takes a recording's first speed.
+        inputs: an `Inputs` profile, a `Recording` whose steer and torques drive the model, or
+            None for the seed profile (`vdsbi.simulator.seed_profile`).
+        v0: initial speed, m/s; None takes a recording's first speed, or the seed profile's.
         effects, effect_params: effects to enable and {effect: {param: value}}.
         noise: sensor noise, "none", "seed" (relative) or "vehicle" (the vehicle's noise_std).
         seed: seed of the noise.
@@ -93,8 +94,10 @@ def simulate(
     """
     import jax
 
-    from ..simulator import sensor_noise, simulate as solve_one
+    from ..simulator import seed_profile, sensor_noise, simulate as solve_one
 
+    if inputs is None:
+        inputs, v0 = seed_profile(), PROFILE_V0 if v0 is None else v0
     veh, source = load_vehicle(vehicle)
     th = checked_theta(theta, veh)
     rec = inputs if isinstance(inputs, Recording) else None
@@ -118,17 +121,22 @@ def simulate(
     )
     if ok and noise != "none":
         ys = np.asarray(sensor_noise(noise, veh.noise_std)(jax.random.key(seed), ys))
-    given = rec if rec is not None else inp
+    return _result(rec if rec is not None else inp, inp, ys, ok, th, v0)
+
+
+def _result(given, inp: Inputs, ys, ok, theta, v0: float) -> SimulateResult:
+    """The simulation with the inputs as `given` (a recording's own values, or the profile)."""
+    as_float = lambda a: None if a is None else np.asarray(a, dtype=float)
     return SimulateResult(
         t=float(inp.t0) + inp.dt * np.arange(inp.num_samples),
         dt=float(inp.dt),
         readings=np.asarray(ys),
         ok=bool(ok),
-        theta=th,
+        theta=theta,
         v0=v0,
-        steer=np.asarray(given.steer, dtype=float),
-        torque_front=None if given.torque_front is None else np.asarray(given.torque_front, dtype=float),
-        torque_rear=None if given.torque_rear is None else np.asarray(given.torque_rear, dtype=float),
+        steer=as_float(given.steer),
+        torque_front=as_float(given.torque_front),
+        torque_rear=as_float(given.torque_rear),
     )
 
 

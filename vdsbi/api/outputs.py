@@ -1,114 +1,32 @@
-"""Writing results: output directories that appear whole or not at all, atomic files, and the
-files `identify` leaves in its directory."""
+"""The files `identify` leaves in its directory (written through `vdsbi.io`'s output directories
+and atomic files)."""
 
 from __future__ import annotations
 
-import contextlib
 import os
 import shutil
 import tempfile
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..io import InputError
+from ..io import (
+    CHECKPOINT as CHECKPOINT,
+    checkpoint_dir as checkpoint_dir,
+    output_dir as output_dir,
+    write_atomically as write_atomically,
+    write_text_atomically as write_text_atomically,
+)
 from ..simulator import PARAM_NAMES, PARAM_UNITS
+from ._export import EXPORT_FORMATS as EXPORT_FORMATS, FILE_NAMES, export
 from ._pages import identify_page
-from ._plots import pairplot, ppc_plot
+from .plots import pairplot, ppc_plot
 
-#: Files `identify` writes into its output directory.
-CHECKPOINT = "checkpoint.npz"
+#: Files `identify` writes into its output directory (besides `CHECKPOINT`).
 RUN_FILE = "run.json"
 ESTIMATOR = "estimator.npz"
-
-
-def _checked(path: str | os.PathLike, *, allow_nonempty: bool) -> Path:
-    """`path` as a Path, if it is a directory that may take results (or does not exist yet)."""
-    out = Path(path)
-    if out.exists() and not out.is_dir():
-        raise InputError(out, "--out", "exists and is not a directory")
-    if out.exists() and any(out.iterdir()) and not allow_nonempty:
-        raise InputError(out, "--out", "directory exists and is not empty; use --resume or another DIR")
-    return out
-
-
-@contextlib.contextmanager
-def output_dir(path: str | os.PathLike, *, resume: bool = False, overwrite: bool = False) -> Iterator[Path]:
-    """Yield a directory to write results into; `path` holds them only if the block succeeds.
-
-    Without `resume`, the block writes into a fresh temporary sibling (``.NAME.partial-*``) that is
-    renamed to `path` on success and deleted on any exception, so a failed or interrupted run
-    leaves nothing at `path`. With `resume`, the block works in `path` itself, as in
-    `checkpoint_dir`.
-
-    Raises:
-        InputError: `path` exists, is not empty, and neither `resume` nor `overwrite` is set.
-    """
-    if resume:
-        with checkpoint_dir(path, resume=True) as out:
-            yield out
-        return
-    out = _checked(path, allow_nonempty=overwrite)
-    parent = out.absolute().parent
-    created = [p for p in [parent, *parent.parents] if not p.exists()]
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=parent))
-    try:
-        yield tmp
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        for p in created:  # innermost first
-            with contextlib.suppress(OSError):
-                p.rmdir()
-        raise
-    if out.exists():
-        shutil.rmtree(out)
-    os.replace(tmp, out)
-
-
-@contextlib.contextmanager
-def checkpoint_dir(
-    path: str | os.PathLike, *, resume: bool = False, checkpoint: str = CHECKPOINT
-) -> Iterator[Path]:
-    """Yield `path` itself, so that checkpoints written in the block survive an interruption.
-
-    The block is expected to write its files atomically. On an exception, `path` is removed again
-    if this call created it and no `checkpoint` was written into it.
-
-    Raises:
-        InputError: `path` is not a directory, or is not empty and `resume` is not set.
-    """
-    out = _checked(path, allow_nonempty=resume)
-    created = not out.exists()
-    out.mkdir(parents=True, exist_ok=True)
-    try:
-        yield out
-    except BaseException:
-        if created and not (out / checkpoint).exists():
-            shutil.rmtree(out, ignore_errors=True)
-        raise
-
-
-def write_atomically(path: str | os.PathLike, write: Callable[[str], None]) -> None:
-    """`write(tmp)` to a temporary sibling renamed into place: no partial file on failure."""
-    path = Path(path)
-    parent = path.absolute().parent
-    parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.partial-", suffix=path.suffix, dir=parent)
-    os.close(fd)
-    os.chmod(tmp, 0o644)  # mkstemp's 0600 is meant for secrets, not results
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def write_text_atomically(path: str | os.PathLike, text: str) -> None:
-    write_atomically(path, lambda tmp: Path(tmp).write_text(text))
 
 
 def summarise(
@@ -183,3 +101,11 @@ def plot_posterior(
         reference=pick(given),
         faded=[params[n].get("identified") is False for n in names],
     )
+
+
+def write_export(run_dir: str | os.PathLike, fmt: str, out: str | os.PathLike | None = None, **kw) -> Path:
+    """`export` written to `out` (default: `run_dir`/FILE_NAMES[fmt]); the path written."""
+    text = export(run_dir, fmt, **kw)
+    path = Path(out) if out is not None else Path(run_dir) / FILE_NAMES[fmt]
+    write_text_atomically(path, text)
+    return path

@@ -244,15 +244,8 @@ def before_after_plot(
             f, unit = display_unit(p["unit"])
             i = list(res.summary["parameters"]).index(n)
             lo, hi = np.asarray(p["prior"]) * f
-            ax.hist(
-                res.samples[:, i] * f,
-                bins=40,
-                range=(lo, hi),
-                density=True,
-                alpha=0.55,
-                color=col,
-                label=label,
-            )
+            style = dict(bins=40, range=(lo, hi), density=True, alpha=0.55, color=col, label=label)
+            ax.hist(res.samples[:, i] * f, **style)
         if n in truth:
             ax.axvline(truth[n] * f, color="k", lw=1.5, label="truth")
         ax.set_xlim(lo, hi)

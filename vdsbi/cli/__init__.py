@@ -19,5 +19,5 @@ COMMANDS: tuple[str, ...] = (
     "._export",
 )
 
-from ..api import output_dir as output_dir  # noqa: E402
+from ..io import output_dir as output_dir  # noqa: E402
 from ._main import build_parser as build_parser, entry as entry, main as main  # noqa: E402

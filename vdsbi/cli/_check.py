@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from .. import api
+from ..io import output_dir
 from ..simulator import CHANNELS
 
 
@@ -44,7 +45,7 @@ def run(args) -> int:
     for w in s["warnings"]:
         print(f"  warning: {w}")
     if args.out:
-        with api.output_dir(args.out, overwrite=True) as d:
+        with output_dir(args.out, overwrite=True) as d:
             res.save(d)
         print(f"wrote {args.out}/recording.csv, summary.json")
     return 0

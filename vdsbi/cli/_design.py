@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from .. import api
+from ..io import output_dir
 from ..simulator import PARAM_NAMES, SEED_TRUE_THETA
 from . import _args
 
@@ -69,7 +70,7 @@ def run(args) -> int:
         speed_window=tuple(args.speed_window),
         log=lambda s: print(s, flush=True),
     )
-    with api.output_dir(args.out, overwrite=args.overwrite) as d:
+    with output_dir(args.out, overwrite=args.overwrite) as d:
         res.save(d)
     print(res.markdown())
     print(f"wrote {args.out}/maneuver.csv, bounds.json, bounds.md, design.json")

@@ -19,7 +19,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "the intervals and the recording in a comment block; json and csv list every parameter.",
     )
     p.add_argument("run_dir", metavar="DIR", help="an identify output folder")
-    p.add_argument("--format", choices=api.EXPORT_FORMATS, default="autoware", help="default autoware")
+    formats = api.outputs.EXPORT_FORMATS
+    p.add_argument("--format", choices=formats, default="autoware", help="default autoware")
     p.add_argument(
         "--out", metavar="FILE", default=None, help="where to write ('-': standard output; default: in DIR)"
     )
@@ -41,6 +42,6 @@ def run(args) -> int:
     if args.out == "-":
         sys.stdout.write(api.export(args.run_dir, args.format, vehicle=vehicle))
         return 0
-    path = api.write_export(args.run_dir, args.format, args.out, vehicle=vehicle)
+    path = api.outputs.write_export(args.run_dir, args.format, args.out, vehicle=vehicle)
     print(f"wrote {path}")
     return 0

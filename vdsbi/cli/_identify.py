@@ -95,7 +95,7 @@ def run(args) -> int:
             print(f"vdsbi: warning: {w['message']}", file=sys.stderr)
     else:
         print(res.table())
-        print(f"wrote {args.out}/posterior.json, samples.csv, pairplot.png, ppc.png, {api.ESTIMATOR}")
+        print(f"wrote {args.out}/posterior.json, samples.csv, pairplot.png, ppc.png, {api.outputs.ESTIMATOR}")
     return 0
 
 

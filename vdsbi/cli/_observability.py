@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from .. import api
-from ..io import InputError, read_recording
+from ..io import InputError, output_dir, read_recording
 from ..simulator import SEED_TRUE_THETA, seed_profile
 from . import _args
 
@@ -78,7 +78,7 @@ def run(args) -> int:
         effect_params=params,
         label=label,
     )
-    with api.output_dir(args.out, overwrite=args.overwrite) as d:
+    with output_dir(args.out, overwrite=args.overwrite) as d:
         res.save(d)
     print(res.markdown())
     print(f"wrote {args.out}/fisher.json, fisher.md")

@@ -8,8 +8,8 @@ import sys
 from pathlib import Path
 
 from .. import api
-from ..io import InputError, read_recording
-from ..simulator import NOMINAL_THETA, PARAM_NAMES, SEED_TRUE_THETA, seed_profile
+from ..io import InputError, read_recording, write_atomically
+from ..simulator import NOMINAL_THETA, PARAM_NAMES, SEED_TRUE_THETA
 from . import _args
 
 PROFILES = ("seed",)
@@ -61,9 +61,9 @@ def run(args) -> int:
     effects, effect_params = _args.effects(args.effects)
     res = api.simulate(
         theta,
-        rec if rec is not None else seed_profile(),
+        rec,
         args.vehicle,
-        v0=args.v0 if args.v0 is not None or rec is not None else api.PROFILE_V0,
+        v0=args.v0,
         effects=effects,
         effect_params=effect_params,
         noise=args.noise,
@@ -78,7 +78,7 @@ def run(args) -> int:
         )
         return 1
     result = res.to_recording(str(out))
-    api.write_atomically(out, result.to_csv)
+    write_atomically(out, result.to_csv)
     src = f"inputs of {args.inputs}" if args.inputs else f"profile '{args.profile}'"
     print(f"wrote {out}: {result.num_samples} samples, {result.duration:.2f} s, {src}, v0 {res.v0:.2f} m/s")
     print("  theta   " + ", ".join(f"{n} {v:.4g}" for n, v in zip(PARAM_NAMES, res.theta)))
@@ -86,6 +86,6 @@ def run(args) -> int:
         print("  effects " + "; ".join(f"{e} {effect_params[e] or '(null)'}" for e in effects))
     print(f"  noise   {args.noise}" + (f" (seed {args.seed})" if args.noise != "none" else ""))
     if args.plot:
-        api.write_atomically(args.plot, lambda p: api.drive_plot(result, res.theta, effects, p))
+        write_atomically(args.plot, lambda p: api.plots.drive_plot(result, res.theta, effects, p))
         print(f"wrote {args.plot}")
     return 0

@@ -16,6 +16,13 @@ from ._drive import (
     read_recording as read_recording,
 )
 from ._errors import InputError as InputError, SimulationError as SimulationError
+from ._files import (
+    CHECKPOINT as CHECKPOINT,
+    checkpoint_dir as checkpoint_dir,
+    output_dir as output_dir,
+    write_atomically as write_atomically,
+    write_text_atomically as write_text_atomically,
+)
 from ._parquet import read_parquet as read_parquet
 from ._recording import (
     LIMITS as LIMITS,
@@ -25,6 +32,7 @@ from ._recording import (
     kinematic_slopes as kinematic_slopes,
     speed_slope as speed_slope,
 )
+from ._resample import running_mean as running_mean
 from ._segments import (
     Segment as Segment,
     estimate_noise_std as estimate_noise_std,

@@ -12,7 +12,7 @@ import pandas as pd
 
 from ..simulator import CHANNELS, INPUTS
 from ._errors import InputError
-from ._resample import check_uniform, resample
+from ._resample import check_uniform, resample, running_mean
 
 #: Columns every recording has.
 REQUIRED: tuple[str, ...] = ("t", "steer")
@@ -515,11 +515,6 @@ def _assemble(
 _KIN_WINDOW = 0.5
 
 
-def _running_mean(x: np.ndarray, n: int) -> np.ndarray:
-    pad = np.pad(x, (n // 2, n - 1 - n // 2), mode="edge")
-    return np.convolve(pad, np.ones(n) / n, mode="valid")
-
-
 def kinematic_slopes(rec: Recording, min_speed: float = 3.0) -> dict[str, float]:
     """Least-squares slopes of two kinematic identities, after a 0.5-s running mean.
 
@@ -535,20 +530,20 @@ def kinematic_slopes(rec: Recording, min_speed: float = 3.0) -> dict[str, float]
     if "vx" not in ch:
         return {}
     n = max(1, int(round(_KIN_WINDOW * rec.rate)))
-    vx = _running_mean(ch["vx"], n)
+    vx = running_mean(ch["vx"], n)
     moving = vx > min_speed
     moving[: n // 2 + 1] = moving[-(n // 2 + 1) :] = False  # edges of the running mean are biased
     if moving.sum() < n:
         return {}
     out = {}
     if "ax" in ch:
-        ax = _running_mean(ch["ax"], n)[moving]
+        ax = running_mean(ch["ax"], n)[moving]
         dv = np.gradient(vx, rec.dt)[moving]
         if ax.std() > 0.3:
             out["dvx/dt~ax"] = float(np.sum(dv * ax) / np.sum(ax * ax))
     if "ay" in ch and "yaw_rate" in ch:
-        ay = _running_mean(ch["ay"], n)[moving]
-        vr = _running_mean(ch["vx"] * ch["yaw_rate"], n)[moving]
+        ay = running_mean(ch["ay"], n)[moving]
+        vr = running_mean(ch["vx"] * ch["yaw_rate"], n)[moving]
         if vr.std() > 0.3:
             out["ay~vx*yaw_rate"] = float(np.sum(ay * vr) / np.sum(vr * vr))
     return out

@@ -1,4 +1,4 @@
-"""Uniform-grid check of time stamps and resampling to the model rate."""
+"""Uniform-grid check of time stamps, resampling to the model rate, and the running mean."""
 
 from __future__ import annotations
 
@@ -79,3 +79,11 @@ def resample(t: np.ndarray, columns: dict[str, np.ndarray], rate: float) -> tupl
             x = np.convolve(pad, kernel, mode="valid")
         out[name] = np.interp(t_new, t, x)
     return t_new, out
+
+
+def running_mean(x: np.ndarray, n: int) -> np.ndarray:
+    """Centred running mean over `n` samples, ends held."""
+    if n <= 1:
+        return x
+    pad = np.pad(x, (n // 2, n - 1 - n // 2), mode="edge")
+    return np.convolve(pad, np.ones(n) / n, mode="valid")

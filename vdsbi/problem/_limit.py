@@ -12,9 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..io import Recording, forward_speed, label_runs
+from ..io import Recording, forward_speed, label_runs, running_mean
 from ..simulator import GRAVITY
-from ._measured import running_mean
 
 #: Steer and yaw rate are smoothed over this long, s (vibration, sensor noise).
 SMOOTHING = 0.2

@@ -4,19 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..io import Recording, estimate_speed, forward_speed
+from ..io import Recording, estimate_speed, forward_speed, running_mean
 
 #: Smoothing of the measured ax that loads the tyres and of the yaw rate that starts a window,
 #: s: IMU vibration (several m/s² on real cars) must not move the loads or the start state.
 SMOOTHING = 0.25
-
-
-def running_mean(x: np.ndarray, n: int) -> np.ndarray:
-    """Centred running mean over `n` samples, ends held."""
-    if n <= 1:
-        return x
-    pad = np.pad(x, (n // 2, n - 1 - n // 2), mode="edge")
-    return np.convolve(pad, np.ones(n) / n, mode="valid")
 
 
 def _samples(rec: Recording) -> int:

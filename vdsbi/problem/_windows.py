@@ -7,9 +7,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..io import Recording, find_segments, forward_speed
+from ..io import Recording, find_segments, forward_speed, running_mean
 from ._limit import subtract
-from ._measured import running_mean
 
 
 @dataclasses.dataclass(frozen=True)
