@@ -1,7 +1,7 @@
 """The C2ST of exact posterior samples: how low the grid's protocol can go.
 
 For each task whose posterior can be sampled exactly (two_moons, gaussian_mixture,
-gaussian_linear_uniform: ``vdsbi.tasks``' samplers, `AbstractTask.posterior_samples`), draw
+gaussian_linear_uniform: ``benchmarks/tasks``' samplers, `AbstractTask.posterior_samples`), draw
 ``--num-samples`` posterior samples at sbibm's observations and score them against sbibm's
 reference posterior samples with sbibm's C2ST, exactly as ``sbi_tasks.py`` scores an estimator.
 A perfect estimator scores this on average; a cell of the grid that misses sbibm's figure by
@@ -31,8 +31,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _sbibm  # noqa: E402
 from sbi_tasks import PUBLISHED, _load  # noqa: E402
-
-from vdsbi.tasks import get_task  # noqa: E402
+from tasks import get_task  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 TASKS = ("gaussian_linear_uniform", "two_moons", "gaussian_mixture")

@@ -33,7 +33,6 @@ reruns whole unless all requested observations are stored. ``--force`` replaces 
 """
 
 import argparse
-import dataclasses
 import fcntl
 import json
 import os
@@ -46,12 +45,13 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _sbibm  # noqa: E402
+from _config import RETIRED, flat_config, make_config  # noqa: E402
 from _grid_plot import plot_grid  # noqa: E402
+from tasks import get_task  # noqa: E402
 
 from vdsbi.diagnostics import c2st  # noqa: E402
-from vdsbi.inference import IdentityEmbedding, NPEConfig, apt  # noqa: E402
+from vdsbi.inference import IdentityEmbedding, NPEConfig, TrainingSettings, apt  # noqa: E402
 from vdsbi.simulator import release_compiled_programs  # noqa: E402
-from vdsbi.tasks import get_task  # noqa: E402
 
 PUBLISHED = {  # sbibm (Lueckmann et al. 2021), mean C2ST over 10 observations, sbi + NSF
     ("two_moons", "npe"): (0.725, 0.606, 0.542),
@@ -83,7 +83,8 @@ SEQUENTIAL = ("apt", "tsnpe")
 
 
 def config_for(budget: int, method: str = "npe", **overrides) -> NPEConfig:
-    """The benchmark's settings at ``budget`` for ``method`` (``overrides``: other `NPEConfig` fields).
+    """The benchmark's settings at ``budget`` for ``method`` (``overrides``: other fields, by
+    `flat_config`'s names).
 
     ``theta_map="affine"`` (the flow on θ, as sbi): on two_moons it scored better than the
     library's default ``"logit"``, which vehicle identification keeps.
@@ -102,19 +103,19 @@ def config_for(budget: int, method: str = "npe", **overrides) -> NPEConfig:
     penalises that mass at x_o itself (``leak_at_observation=True``), since the batch penalty
     draws only at the training batch's contexts.
     """
-    base = NPEConfig(
+    base = dict(
         batch_size=128 if budget <= 10_000 else 512,
         learning_rate=5e-4,
         patience=20,
         max_epochs=500,
         theta_map="affine",
         patience_unit="epochs" if method == "tsnpe" or (method == "apt" and budget < 10_000) else "new_data",
-        average_epochs=1.0 if method in ("npe", "apt") else NPEConfig.average_epochs,
+        average_epochs=1.0 if method in ("npe", "apt") else TrainingSettings().average_epochs,
     )
     own = {"fmpe": FMPE, "apt": APT}.get(method, {})
     if method == "apt" and budget >= 100_000:
         own = {**own, "leak_at_observation": True}
-    return dataclasses.replace(base, **{**own, **overrides})
+    return make_config(**{**base, **own, **overrides})
 
 
 class _Observations:
@@ -138,22 +139,10 @@ class _Observations:
 def _rounds(state):
     """Per round: epochs, best epoch, patience (epochs), wall seconds and, for TSNPE, how the
     truncated prior was drawn (proposal, acceptance, draws filled in from the wider proposal);
-    for APT, the posterior's mass inside the box (``box_mass``) and, where that was under
-    ``min_proposal_box_mass``, ``"proposal": "prior (leaked)"``; under ``min_box_mass_ratio``
-    the mass after the round's training and whether the round was undone."""
+    for APT, the posterior's mass inside the box (``box_mass``)."""
     keys = ("epochs", "best_epoch", "patience", "train_s")
-    extra = ("region_proposal", "acceptance", "num_filled", "box_mass", "box_mass_after", "reverted")
-    return [
-        {k: h.get(k) for k in keys}
-        | {k: h[k] for k in extra if k in h}
-        | ({"proposal": h["proposal"]} if _fell_back(h) else {})
-        for h in state.history
-    ]
-
-
-def _fell_back(h) -> bool:
-    """Whether APT round ``h`` proposed from the prior because its posterior had leaked."""
-    return h.get("proposal") == "prior (leaked)"
+    extra = ("region_proposal", "acceptance", "num_filled", "box_mass")
+    return [{k: h.get(k) for k in keys} | {k: h[k] for k in extra if k in h} for h in state.history]
 
 
 def _provenance():
@@ -188,10 +177,7 @@ def train_posterior(task, method, budget, cfg, key, x_o, obs_id=None):
         print(
             f"    {task.name} {method} {budget} {where}round {state.round}/{rounds}: "
             f"{h['epochs']} epochs (best {h['best_epoch']}), {h['train_s']:.0f} s"
-            + (f", posterior {h['box_mass']:.1%} in the box" if "box_mass" in h else "")
-            + (", proposed from the prior" if _fell_back(h) else "")
-            + (f", {h['box_mass_after']:.1%} after" if "box_mass_after" in h else "")
-            + (": round undone" if h.get("reverted") else ""),
+            + (f", posterior {h['box_mass']:.1%} in the box" if "box_mass" in h else ""),
             flush=True,
         )
 
@@ -248,7 +234,7 @@ def run_cell(
         )
         records.append(rec)
     run["loadavg_end"] = [round(v, 2) for v in os.getloadavg()]
-    cell = {"task": task_name, "method": method, "budget": budget, "config": dataclasses.asdict(cfg)}
+    cell = {"task": task_name, "method": method, "budget": budget, "config": flat_config(cfg)}
     return summarise({**cell, "per_observation": records, "runs": [run]})
 
 
@@ -290,9 +276,11 @@ def summarise(cell):
 
 
 def same_config(stored, config):
-    """Whether a stored cell's config is ``config``: a field added to `NPEConfig` after the cell
-    ran counts as equal when ``config`` keeps its default (the estimator is then unchanged)."""
-    defaults = dataclasses.asdict(NPEConfig())
+    """Whether a stored cell's (flat) config is ``config``: a field added after the cell ran
+    counts as equal when ``config`` keeps its default, and a field removed since (`RETIRED`)
+    when the cell ran it at the value that made it a no-op (the estimator is then unchanged)."""
+    defaults = flat_config(NPEConfig())
+    stored = {k: v for k, v in stored.items() if not (k in RETIRED and v == RETIRED[k])}
     return all(stored.get(k, defaults[k]) == v for k, v in config.items()) and set(stored) <= set(config)
 
 
@@ -363,7 +351,7 @@ def _stale(results) -> set:
 
 def current(cell) -> bool:
     """Whether a stored cell ran with the settings `config_for` gives its method and budget now."""
-    return same_config(cell["config"], dataclasses.asdict(config_for(cell["budget"], cell["method"])))
+    return same_config(cell["config"], flat_config(config_for(cell["budget"], cell["method"])))
 
 
 def main():
@@ -380,14 +368,14 @@ def main():
     ap.add_argument(
         "--patience-unit",
         choices=["epochs", "new_data"],
-        help="NPEConfig.patience_unit (default: its default)",
+        help="SequentialSettings.patience_unit (default: its default)",
     )
     ap.add_argument(
         "--set",
         nargs="+",
         default=[],
         metavar="FIELD=VALUE",
-        help="other NPEConfig fields, e.g. --set num_atoms=5 (use another --out for variants)",
+        help="other config fields (`flat_config`'s names), e.g. --set num_atoms=5 (use another --out for variants)",
     )
     ap.add_argument("--force", action="store_true", help="rerun and replace stored cells (else resume)")
     ap.add_argument(
@@ -422,7 +410,7 @@ def main():
     cells = [(b, m, t) for b in sorted(args.budgets) for m in args.methods for t in args.tasks]
     for b, m, t in cells:
         stored = None if args.force else {_key(r): r for r in _load(args.out)}.get((t, m, b))
-        ids = todo(stored, m, dataclasses.asdict(config_for(b, m, **overrides)), obs_ids)
+        ids = todo(stored, m, flat_config(config_for(b, m, **overrides)), obs_ids)
         if args.redo and m in SEQUENTIAL:
             ids = list(obs_ids)
         if not ids:  # resume: finished observations are skipped
@@ -455,12 +443,12 @@ def _merge_from(src, out, source):
 
 def _parse_overrides(items):
     """``["num_atoms=5", ...]`` -> ``{"num_atoms": 5}``, each value typed as its field's default."""
-    defaults = dataclasses.asdict(NPEConfig())
+    defaults = flat_config(NPEConfig())
     out = {}
     for item in items:
         name, sep, value = item.partition("=")
         if not sep or name not in defaults:
-            raise SystemExit(f"--set wants FIELD=VALUE with an NPEConfig field, got {item!r}")
+            raise SystemExit(f"--set wants FIELD=VALUE with a config field (`flat_config`), got {item!r}")
         kind = type(defaults[name])
         out[name] = value if defaults[name] is None else (value == "True" if kind is bool else kind(value))
     return out
@@ -512,7 +500,7 @@ def _save(path, result, source, replace=False):
         # The cells' own devices, not this process's: a merge may join cells run elsewhere.
         meta = {
             "device": ", ".join(sorted({run["device"] for r in results for run in r["runs"]})),
-            "config": {str(b): dataclasses.asdict(config_for(b)) for b in BUDGETS},
+            "config": {str(b): flat_config(config_for(b)) for b in BUDGETS},
             "protocol": __doc__,
         }
         with open(path + ".tmp", "w") as f:

@@ -13,7 +13,6 @@ embedding's SBC KS p-values and coverage under its ``calibration``) and summarie
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
 import time
@@ -22,6 +21,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
+from _config import flat_config, make_config
 
 from vdsbi.diagnostics import expected_coverage, sbc_ks_pvalues, sbc_ranks
 from vdsbi.inference import IdentifySettings, identify, observation, seed_prior
@@ -51,7 +51,6 @@ def main(argv=None):
     ap.add_argument("--max-epochs", type=int, default=None)
     ap.add_argument("--patience", type=int, default=None)
     ap.add_argument("--lr-schedule", choices=("constant", "cosine"), default=None)
-    ap.add_argument("--ensemble", type=int, default=None)
     ap.add_argument("--theta-map", choices=("logit", "affine"), default=None)
     ap.add_argument("--tail-bound", type=float, default=None, help="spline interval [-B, B] of the flow")
     ap.add_argument("--tag", default="", help="suffix for the output files")
@@ -84,13 +83,12 @@ def main(argv=None):
         "max_epochs": 10 if args.quick else args.max_epochs,
         "patience": args.patience,
         "lr_schedule": args.lr_schedule,
-        "ensemble": args.ensemble,
         "theta_map": args.theta_map,
         "tail_bound": args.tail_bound,
     }
     overrides = {k: v for k, v in overrides.items() if v is not None}
     configs = {  # each embedding's IdentifySettings default, with the overrides
-        emb: dataclasses.replace(IdentifySettings(embedding=emb).config, **overrides)
+        emb: make_config(**{**flat_config(IdentifySettings(embedding=emb).config), **overrides})
         for emb in args.embeddings.split(",")
     }
     results = {
@@ -99,7 +97,7 @@ def main(argv=None):
             "test": n_test,
             "posterior_samples": n_post,
             "rounds": 1,
-            "config": {emb: dataclasses.asdict(c) for emb, c in configs.items()},
+            "config": {emb: flat_config(c) for emb, c in configs.items()},
         },
         "load_average_at_start": os.getloadavg()[0],
         "embeddings": {},

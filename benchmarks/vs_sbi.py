@@ -29,7 +29,6 @@ re-run), and the table to ``benchmarks/results/vs_sbi.md``.
 """
 
 import argparse
-import dataclasses
 import json
 import os
 import subprocess
@@ -41,10 +40,11 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _sbibm  # noqa: E402
+from _config import flat_config  # noqa: E402
 from sbi_tasks import config_for  # noqa: E402
+from tasks import get_task  # noqa: E402
 
 from vdsbi.inference import IdentityEmbedding, Posterior, npe  # noqa: E402
-from vdsbi.tasks import get_task  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 OURS = {"average_epochs": 0.0}  # the grid's NPE settings less the weight averaging (see above)
@@ -155,7 +155,7 @@ def run_cell(task_name, budget, n_obs, num_samples, seed):
         "load_sbi": load_sbi,
         "load_ours": load_ours,
         "commit": commit,
-        "ours_config": dataclasses.asdict(config_for(budget, **OURS)),
+        "ours_config": flat_config(config_for(budget, **OURS)),
         "n_obs": n_obs,
         "torch_threads": torch.get_num_threads(),
     }

@@ -20,7 +20,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from vdsbi.api.plots import pairplot
-from vdsbi.inference import TRACE_COUNTS, IdentifySettings, Posterior, identify, observation, seed_prior
+from vdsbi.inference import (
+    AbstractThetaMap,
+    IdentifySettings,
+    Posterior,
+    identify,
+    observation,
+    seed_prior,
+)
 from vdsbi.simulator import (
     NOMINAL_THETA,
     PARAM_NAMES,
@@ -57,6 +64,24 @@ def to_seed_units(name: str, value: np.ndarray) -> np.ndarray:
     if name.startswith("C_"):
         return (value - NOMINAL_THETA[name]) / 1e5
     return value
+
+
+#: JAX's monitoring event for tracing a jitted function (reported with its ``fun_name``).
+JAXPR_TRACE_EVENT = "/jax/core/compile/jaxpr_trace_duration"
+
+
+def _replaced(settings, **fields):
+    """``settings`` with the ``fields`` that are not None replaced."""
+    return dataclasses.replace(settings, **{k: v for k, v in fields.items() if v is not None})
+
+
+def _as_json(settings):
+    """A settings dataclass as JSON-ready nested dicts; a θ map by its name."""
+    if isinstance(settings, AbstractThetaMap):
+        return settings.name
+    if dataclasses.is_dataclass(settings):
+        return {f.name: _as_json(getattr(settings, f.name)) for f in dataclasses.fields(settings)}
+    return settings
 
 
 def main(argv=None) -> dict:
@@ -111,19 +136,17 @@ def main(argv=None) -> dict:
     settings = IdentifySettings(rounds=rounds, sims_per_round=sims, embedding=args.embedding)
     if args.truncate is not None:
         settings = dataclasses.replace(settings, truncate=args.truncate)
-    overrides = {
-        "max_epochs": args.max_epochs,
-        "patience": args.patience,
-        "lr_schedule": args.lr_schedule,
-        "later_max_epochs": args.later_max_epochs,
-        "tail_bound": args.tail_bound,
-    }
-    overrides = {k: v for k, v in overrides.items() if v is not None}
-    settings = dataclasses.replace(settings, config=dataclasses.replace(settings.config, **overrides))
+    training = {"max_epochs": args.max_epochs, "patience": args.patience, "lr_schedule": args.lr_schedule}
     if args.quick:
-        settings = dataclasses.replace(
-            settings, config=dataclasses.replace(settings.config, max_epochs=15, patience=4)
-        )
+        training.update(max_epochs=15, patience=4)
+    config = settings.config
+    config = dataclasses.replace(
+        config,
+        flow=_replaced(config.flow, tail_bound=args.tail_bound),
+        training=_replaced(config.training, **training),
+        sequential=_replaced(config.sequential, later_max_epochs=args.later_max_epochs),
+    )
+    settings = dataclasses.replace(settings, config=config)
 
     epoch_ends: dict[int, list[float]] = {}  # wall clock at each epoch's end, per round
 
@@ -132,13 +155,20 @@ def main(argv=None) -> dict:
         print(f"  round {r + 1}/{rounds} epoch {e:3d}  train {tl:9.3f}  val {vl:9.3f}", flush=True)
 
     traces = []  # compiled-step traces after each round: growing rounds must not recompile
+    traced = {"train_steps": 0, "eval_steps": 0}
+
+    def on_trace(event, duration, fun_name=None, **_):
+        if event == JAXPR_TRACE_EVENT and fun_name in traced:
+            traced[fun_name] += 1
+
+    jax.monitoring.register_event_duration_secs_listener(on_trace)
     round_spread, diag_s = [], [0.0]
     inp = simulator.inputs
     u = jnp.stack([inp.steer, inp.torque_front, inp.torque_rear], axis=-1).astype(jnp.float32)
     x_obs = observation(x_o[0], u, args.embedding)
 
     def on_round(state):
-        traces.append({k: TRACE_COUNTS[k] for k in ("train_steps", "eval_steps")})
+        traces.append(dict(traced))
         if args.round_diagnostics:
             t0 = time.perf_counter()
             draws = Posterior(state.flow, x_obs).sample(jax.random.key(1000 + state.round), 10_000)
@@ -183,9 +213,9 @@ def main(argv=None) -> dict:
             "literal_prior": args.literal_prior,
             "seed": args.seed,
             "prior": {n: [float(lo[i]), float(hi[i])] for i, n in enumerate(PARAM_NAMES)},
-            "patience_unit": settings.config.patience_unit,
+            "patience_unit": settings.config.sequential.patience_unit,
             "truncate": settings.truncate,
-            "config": dataclasses.asdict(settings.npe_config),
+            "config": _as_json(settings.npe_config),
         },
         "device": f"{jax.devices()[0].platform}:{jax.devices()[0].device_kind}",
         "load_average_at_start": load_start,

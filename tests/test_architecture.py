@@ -20,11 +20,10 @@ LAYERS: dict[str, int] = {
     "io": 1,
     "problem": 2,
     "inference": 3,
-    "tasks": 4,
-    "diagnostics": 5,
-    "discovery": 6,
-    "api": 7,
-    "cli": 8,
+    "diagnostics": 4,
+    "discovery": 5,
+    "api": 6,
+    "cli": 7,
 }
 
 

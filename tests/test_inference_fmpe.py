@@ -10,9 +10,13 @@ import pytest
 from vdsbi.inference import (
     BoxPrior,
     FlowMatchingEstimator,
+    FlowMatchingSettings,
     IdentityEmbedding,
+    IdentityMap,
+    LogitMap,
     NPEConfig,
     Posterior,
+    TrainingSettings,
     apt,
     npe,
 )
@@ -47,7 +51,7 @@ def test_ode_maps_noise_to_samples_and_back(getkey, x64):
     k_est, k_z = getkey(), getkey()
     errors = []
     for steps in (10, 40):
-        est = _estimator(k_est, prior, "logit", ode_steps=steps)
+        est = _estimator(k_est, prior, LogitMap(), ode_steps=steps)
         ctx = est.context(jnp.array([0.7]))
         z0 = jax.random.normal(k_z, (64, 3))
         z1 = est.transport(z0, ctx, 0.0, 1.0)
@@ -60,7 +64,7 @@ def test_ode_maps_noise_to_samples_and_back(getkey, x64):
 def test_density_integrates_to_one_and_matches_change_of_variables(getkey, x64):
     # logit map: all mass inside the box, so the grid integral must be 1
     prior = BoxPrior(jnp.array([-1.0, 0.0]), jnp.array([2.0, 1.5]))
-    post = Posterior(_estimator(getkey(), prior, "logit", ode_steps=12), jnp.array([0.3]))
+    post = Posterior(_estimator(getkey(), prior, LogitMap(), ode_steps=12), jnp.array([0.3]))
     n = 64
     g0, g1 = (jnp.linspace(lo, hi, n + 1) for lo, hi in ((-1.0, 2.0), (0.0, 1.5)))
     mids = [0.5 * (g[1:] + g[:-1]) for g in (g0, g1)]
@@ -72,7 +76,7 @@ def test_density_integrates_to_one_and_matches_change_of_variables(getkey, x64):
     # affine map, identity standardisation, wide box: θ is the ODE state itself, so
     # log q(T(z0)) = log N(z0) - log|det ∂T/∂z0|, with T differentiated through the solver
     wide = BoxPrior(jnp.full(2, -50.0), jnp.full(2, 50.0))
-    est = _estimator(getkey(), wide, "affine", ode_steps=24)
+    est = _estimator(getkey(), wide, IdentityMap(), ode_steps=24)
     ctx = est.context(jnp.array([-0.4]))
     z0 = jax.random.normal(getkey(), (5, 2))
 
@@ -95,9 +99,9 @@ def test_trained_on_linear_gaussian_recovers_the_analytic_posterior(getkey):
     theta = np.asarray(prior.sample(getkey(), 4000))
     x = theta @ a.T + s * np.asarray(jax.random.normal(getkey(), theta.shape))
     cfg = NPEConfig(
-        estimator="fmpe", theta_map="affine", fmpe_hidden=32, fmpe_num_blocks=2, fmpe_ode_steps=8,
-        batch_size=128, learning_rate=3e-3, max_epochs=40, patience=40,
-    )  # fmt: skip
+        flow=FlowMatchingSettings(theta_map=IdentityMap(), hidden=32, num_blocks=2, ode_steps=8),
+        training=TrainingSettings(batch_size=128, learning_rate=3e-3, max_epochs=40, patience=40),
+    )
     est, info = npe(getkey(), prior, theta, x, embedding=IdentityEmbedding(2), config=cfg)
     assert info["val_losses"][-1] < 0.8 * info["val_losses"][0]
     cov = s**2 * np.linalg.inv(a.T @ a)
@@ -116,7 +120,7 @@ def test_trained_on_linear_gaussian_recovers_the_analytic_posterior(getkey):
 
 def test_posterior_file_round_trip_and_bad_configs(getkey, tmp_path):
     prior = BoxPrior(jnp.array([0.0, -2.0]), jnp.array([1.0, 2.0]), names=("a", "b"))
-    post = Posterior(_estimator(getkey(), prior, "affine", ode_steps=6), jnp.array([0.2]))
+    post = Posterior(_estimator(getkey(), prior, IdentityMap(), ode_steps=6), jnp.array([0.2]))
     post.save(tmp_path / "fmpe.npz")
     back = Posterior.load(tmp_path / "fmpe.npz")
     assert isinstance(back.flow, FlowMatchingEstimator) and back.prior.names == ("a", "b")
@@ -125,8 +129,6 @@ def test_posterior_file_round_trip_and_bad_configs(getkey, tmp_path):
     np.testing.assert_array_equal(mine, theirs)
     assert np.all((mine >= [0.0, -2.0]) & (mine <= [1.0, 2.0]))
     np.testing.assert_allclose(np.asarray(back.log_prob(mine)), np.asarray(post.log_prob(mine)), rtol=1e-6)
-    with pytest.raises(ValueError, match="ensemble"):
-        NPEConfig(estimator="fmpe", ensemble=2)
     with pytest.raises(ValueError, match="atomic"):
         apt(
             getkey(),
@@ -136,5 +138,5 @@ def test_posterior_file_round_trip_and_bad_configs(getkey, tmp_path):
             embedding=IdentityEmbedding(2),
             rounds=2,
             sims_per_round=100,
-            config=NPEConfig(estimator="fmpe"),
+            config=NPEConfig(flow=FlowMatchingSettings()),
         )

@@ -80,9 +80,9 @@ def test_data_parallel_step_on_four_devices():
         prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
         theta = np.asarray(prior.sample(jax.random.key(0), 64))
         x = theta + 0.1 * np.asarray(jax.random.normal(jax.random.key(1), theta.shape))
-        cfg = NPEConfig(num_layers=2, num_bins=4, hidden=8)
+        cfg = SplineFlowSettings(num_layers=2, num_bins=4, hidden=8)
         flow = build_flow(jax.random.key(2), prior, IdentityEmbedding(2), theta, x, cfg)
-        opt = make_optimizer(1e-3, 0.0, 5.0)
+        opt = make_optimizer(TrainingSettings(learning_rate=1e-3))
         batch = (theta, x, np.ones(64, bool))
         res = []
         assert data_mesh().devices.size == 1  # CPU default: no batch sharding
@@ -104,7 +104,7 @@ def test_data_parallel_step_on_four_devices():
         assert len(x_all.sharding.device_set) == 4 and len(jax.tree.leaves(f1)[0].sharding.device_set) == 1
         one = np.asarray(Posterior(f1, x_all).sample(jax.random.key(4), 8))
         np.testing.assert_array_equal(one, np.asarray(Posterior(f1, x[0]).sample(jax.random.key(4), 8)))
-        print("OK", TRACE_COUNTS["train_step"])
+        print("OK")
         """,
         {
             "XLA_FLAGS": f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=4",

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 import scipy.stats
 
+from benchmarks.tasks import TASKS, get_task, slcp_log_likelihood
 from vdsbi.diagnostics import c2st
-from vdsbi.inference import IdentityEmbedding, NPEConfig, apt
-from vdsbi.tasks import TASKS, get_task, slcp_log_likelihood
+from vdsbi.inference import IdentityEmbedding, NPEConfig, TrainingSettings, apt
 
 
 @pytest.mark.parametrize("name", sorted(TASKS))
@@ -95,7 +95,10 @@ def test_two_moons_apt_reaches_c2st_below_078():
     # Both rounds run into max_epochs at this learning rate, so the unaveraged weights end
     # wherever the SGD noise leaves them, which on another CPU can fail the test; the one-epoch
     # weight average makes the score robust to that, so the test trains with it.
-    cfg = NPEConfig(batch_size=128, learning_rate=1e-3, max_epochs=40, patience=10, average_epochs=1.0)
+    training = TrainingSettings(
+        batch_size=128, learning_rate=1e-3, max_epochs=40, patience=10, average_epochs=1.0
+    )
+    cfg = NPEConfig(training=training)
     post, state = apt(
         jax.random.key(0),
         task.simulate,

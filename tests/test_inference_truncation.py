@@ -9,17 +9,28 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from vdsbi.inference import BoxPrior, IdentityEmbedding, NPEConfig, _truncation, apt, build_flow
+from vdsbi.inference import (
+    BoxPrior,
+    IdentityEmbedding,
+    IdentityMap,
+    NPEConfig,
+    SplineFlowSettings,
+    TrainingSettings,
+    _truncation,
+    apt,
+    build_flow,
+)
 from vdsbi.inference._posterior import _log_prob
 
-CONFIG = NPEConfig(num_layers=2, num_bins=4, hidden=8, theta_map="affine", truncation_samples=4000)
+FLOW = SplineFlowSettings(num_layers=2, num_bins=4, hidden=8, theta_map=IdentityMap())
+SAMPLES = 4000  # posterior draws that locate the region's level
 
 
 def _region(key, d, width, centre=0.5):
     """An untrained flow whose density is ~ N(centre, width²) per coordinate in the box [-5, 5]^d."""
     prior = BoxPrior(-5.0 * np.ones(d), 5.0 * np.ones(d))
     theta = centre + width * np.asarray(jax.random.normal(key, (2000, d)), np.float32)
-    flow = build_flow(jax.random.fold_in(key, 1), prior, IdentityEmbedding(d), theta, theta, CONFIG)
+    flow = build_flow(jax.random.fold_in(key, 1), prior, IdentityEmbedding(d), theta, theta, FLOW)
     return flow, prior, theta[0]
 
 
@@ -43,8 +54,12 @@ def test_ellipsoid_and_prior_rejection_draw_the_same_truncated_prior(getkey, mon
     monkeypatch.setattr(_truncation, "_SCALE", scale)
     flow, prior, x_o = _region(getkey(), d=3, width=0.3, centre=4.5)
     n, key = 2000, getkey()  # one key: the same reference draws, hence the same region
-    by_prior, info_p = _truncation.truncated_prior(key, flow, prior, x_o, n, CONFIG, proposal="prior")
-    by_ell, info_e = _truncation.truncated_prior(key, flow, prior, x_o, n, CONFIG, proposal="ellipsoid")
+    by_prior, info_p = _truncation.truncated_prior(
+        key, flow, prior, x_o, n, num_samples=SAMPLES, proposal="prior"
+    )
+    by_ell, info_e = _truncation.truncated_prior(
+        key, flow, prior, x_o, n, num_samples=SAMPLES, proposal="ellipsoid"
+    )
     assert info_p["num_filled"] == info_e["num_filled"] == 0
     assert info_e["region_covered"] and (info_e["ellipsoid_growths"] > 0) == (scale < 1)
     assert info_e["acceptance"] > 20 * info_p["acceptance"]
@@ -72,7 +87,7 @@ def test_widened_region_is_the_hpd_region_of_the_wider_gaussian(getkey, widen):
 def test_auto_reaches_a_ten_dimensional_region_without_posterior_draws(getkey):
     """Prior mass of the region ~1e-12: rejection from the box finds nothing, the ellipsoid does."""
     flow, prior, x_o = _region(getkey(), d=10, width=0.1)
-    theta, info = _truncation.truncated_prior(getkey(), flow, prior, x_o, 1000, CONFIG)
+    theta, info = _truncation.truncated_prior(getkey(), flow, prior, x_o, 1000, num_samples=SAMPLES)
     assert info["region_proposal"] == "ellipsoid" and info["region_covered"]
     assert info["num_filled"] == 0 and theta.shape == (1000, 10)
     assert np.all(np.isfinite(np.asarray(_log_prob(flow, theta, x_o))))
@@ -84,7 +99,9 @@ def test_unreachable_region_is_filled_from_the_wider_proposal_and_warned(getkey,
     monkeypatch.setattr(_truncation, "_BATCHES", 1)
     flow, prior, x_o = _region(getkey(), d=10, width=0.1)
     with pytest.warns(UserWarning, match="wider prior region"):
-        theta, info = _truncation.truncated_prior(getkey(), flow, prior, x_o, 1000, CONFIG, proposal="prior")
+        theta, info = _truncation.truncated_prior(
+            getkey(), flow, prior, x_o, 1000, num_samples=SAMPLES, proposal="prior"
+        )
     assert info["num_filled"] == 1000 - round(info["acceptance"] * 10_000) > 900
     theta = np.asarray(theta)
     assert theta.shape == (1000, 10) and np.all(np.abs(theta) <= 5.0)
@@ -99,7 +116,10 @@ def test_tsnpe_rounds_propose_from_the_truncated_prior(getkey):
         return theta + 0.03 * jax.random.normal(key, theta.shape), jnp.ones(theta.shape[0], bool)
 
     prior = BoxPrior(-np.ones(6), np.ones(6))
-    config = NPEConfig(num_layers=2, num_bins=4, hidden=16, max_epochs=100, theta_map="affine")
+    config = NPEConfig(
+        flow=SplineFlowSettings(num_layers=2, num_bins=4, hidden=16, theta_map=IdentityMap()),
+        training=TrainingSettings(max_epochs=100),
+    )
     emb = IdentityEmbedding(6)
     x_o = np.full(6, 0.2)
     _, state = apt(

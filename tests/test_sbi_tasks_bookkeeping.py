@@ -1,7 +1,6 @@
 """The sbibm grid's bookkeeping: cells resume, pieces merge, the table and the file's metadata say
 what was run where. Synthetic cells, no training."""
 
-import dataclasses
 import importlib.util
 import json
 from pathlib import Path
@@ -21,7 +20,7 @@ def grid():
 
 def cell(grid, method, obs_scores, device="cpu:cpu", budget=10_000, **overrides):
     """A finished cell as `run_cell` returns it, with C2ST ``obs_scores[i]`` at observation i."""
-    config = dataclasses.asdict(grid.config_for(budget, method, **overrides))
+    config = grid.flat_config(grid.config_for(budget, method, **overrides))
     ids = sorted(obs_scores)
     recs = [{"obs_id": i, "c2st": obs_scores[i], "train_s": 1.0, "rounds": [], "invalid": 0} for i in ids]
     run = {"obs_ids": ids, "commit": "abc", "device": device, "loadavg": [0.1], "loadavg_end": [0.2]}
@@ -48,21 +47,28 @@ def test_amortised_cells_and_changed_settings_replace_whole(grid):
 
 def test_resume_runs_only_what_is_missing(grid):
     stored_apt, stored_npe = cell(grid, "apt", {1: 0.6, 3: 0.6}), cell(grid, "npe", {1: 0.6, 2: 0.6})
-    apt_config = dataclasses.asdict(grid.config_for(10_000, "apt"))
-    npe_config = dataclasses.asdict(grid.config_for(10_000, "npe"))
+    apt_config = grid.flat_config(grid.config_for(10_000, "apt"))
+    npe_config = grid.flat_config(grid.config_for(10_000, "npe"))
     assert grid.todo(stored_apt, "apt", apt_config, [1, 2, 3, 4]) == [2, 4]
     assert grid.todo(stored_npe, "npe", npe_config, [1, 2]) == []
     assert grid.todo(stored_npe, "npe", npe_config, [1, 2, 3]) == [1, 2, 3]  # one network: rerun
-    changed = dataclasses.asdict(grid.config_for(10_000, "apt", patience=5))
+    changed = grid.flat_config(grid.config_for(10_000, "apt", patience=5))
     assert grid.todo(stored_apt, "apt", changed, [1, 2]) == [1, 2]
 
 
 def test_a_field_added_later_matches_only_at_its_default(grid):
-    config = dataclasses.asdict(grid.config_for(10_000, "apt"))
+    config = grid.flat_config(grid.config_for(10_000, "apt"))
     older = {k: v for k, v in config.items() if k != "average_epochs"}  # before the field existed
-    default = dataclasses.asdict(grid.NPEConfig())
+    default = grid.flat_config(grid.NPEConfig())
     assert grid.same_config(older, {**config, "average_epochs": default["average_epochs"]})
     assert not grid.same_config(older, {**config, "average_epochs": default["average_epochs"] + 1.0})
+
+
+def test_a_removed_field_matches_only_at_the_value_that_made_it_a_no_op(grid):
+    config = grid.flat_config(grid.config_for(10_000, "apt"))
+    assert grid.same_config({**config, "ensemble": 1, "combined_loss": False}, config)
+    assert not grid.same_config({**config, "ensemble": 3}, config)
+    assert grid.make_config(**config) == grid.config_for(10_000, "apt")
 
 
 def test_table_marks_published_comparison_and_stale_settings(grid):

@@ -109,19 +109,20 @@ def test_seed_prior_is_physical():
 
 
 def test_identify_settings_train_each_embedding_by_its_own_default():
-    from vdsbi.inference import IdentifySettings, NPEConfig
+    from vdsbi.inference import IdentifySettings, NPEConfig, TrainingSettings
 
     cnn, stats = IdentifySettings(embedding="cnn"), IdentifySettings(embedding="stats")
     # round 1 runs a fixed decaying schedule, shorter for the costly CNN
-    assert cnn.config.lr_schedule == stats.config.lr_schedule == "cosine"
-    assert cnn.config.max_epochs < stats.config.max_epochs
-    assert cnn.npe_config.x_standardize == "trajectory"
+    assert cnn.config.training.lr_schedule == stats.config.training.lr_schedule == "cosine"
+    assert cnn.config.training.max_epochs < stats.config.training.max_epochs
+    assert cnn.npe_config.flow.x_standardize == "trajectory"
     # the CNN's later rounds are capped (bounded Table II time); the cheap statistics' are not
-    assert cnn.config.later_max_epochs is not None and stats.config.later_max_epochs is None
+    assert cnn.config.sequential.later_max_epochs is not None
+    assert stats.config.sequential.later_max_epochs is None
     assert cnn.truncate and stats.truncate  # TSNPE, not the atomic loss (experiments/paper_table2.py)
     # the CNN's spline interval is wider than the default: base draws past ±3 escaped to the box edges
-    assert cnn.config.tail_bound > NPEConfig().tail_bound
-    mine = NPEConfig(max_epochs=7)
+    assert cnn.config.flow.tail_bound > NPEConfig().flow.tail_bound
+    mine = NPEConfig(training=TrainingSettings(max_epochs=7))
     assert IdentifySettings(embedding="cnn", config=mine).config is mine  # an explicit one is kept
 
 

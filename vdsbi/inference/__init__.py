@@ -4,7 +4,13 @@ from ._apt import apt as apt
 from ._apt_state import APTState as APTState, load_state as load_state, save_state as save_state
 from ._build import build_flow as build_flow
 from ._cnn import CNNEmbedding as CNNEmbedding
-from ._config import NPEConfig as NPEConfig, TrainConfig as TrainConfig
+from ._config import (
+    FlowMatchingSettings as FlowMatchingSettings,
+    NPEConfig as NPEConfig,
+    SequentialSettings as SequentialSettings,
+    SplineFlowSettings as SplineFlowSettings,
+    TrainingSettings as TrainingSettings,
+)
 from ._embeddings import (
     AbstractEmbedding as AbstractEmbedding,
     IdentityEmbedding as IdentityEmbedding,
@@ -12,12 +18,7 @@ from ._embeddings import (
     embedding_from_spec as embedding_from_spec,
     register_embedding as register_embedding,
 )
-from ._ensemble import (
-    FlowEnsemble as FlowEnsemble,
-    flow_from_spec as flow_from_spec,
-    trainable_filter as trainable_filter,
-)
-from ._flow import ConditionalFlow as ConditionalFlow
+from ._flow import ConditionalFlow as ConditionalFlow, flow_from_spec as flow_from_spec
 from ._flow_matching import (
     FlowMatchingEstimator as FlowMatchingEstimator,
     FlowMatchingLoss as FlowMatchingLoss,
@@ -48,14 +49,19 @@ from ._spline import (
 )
 from ._standardize import Standardizer as Standardizer
 from ._summaries import DEFAULT_LAGS as DEFAULT_LAGS, summary_statistics as summary_statistics
+from ._theta_map import (
+    AbstractThetaMap as AbstractThetaMap,
+    IdentityMap as IdentityMap,
+    LogitMap as LogitMap,
+)
 from ._train import (
-    TRACE_COUNTS as TRACE_COUNTS,
     eval_steps as eval_steps,
     fit as fit,
     init_opt_state as init_opt_state,
     make_optimizer as make_optimizer,
     train_step as train_step,
     train_steps as train_steps,
+    trainable_filter as trainable_filter,
 )
 from ._vehicle import (
     IdentifySettings as IdentifySettings,

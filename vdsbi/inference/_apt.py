@@ -13,7 +13,7 @@ from jaxtyping import Array, PRNGKeyArray
 
 from ._apt_state import APTState
 from ._build import build_flow, first_round_loss
-from ._config import NPEConfig
+from ._config import FlowMatchingSettings, NPEConfig, SequentialSettings, TrainingSettings
 from ._embeddings import AbstractEmbedding
 from ._flow import ConditionalFlow
 from ._loss import AtomicLoss
@@ -78,8 +78,8 @@ def apt(
     """
     x_o = on_one_device(x_o)
     sims = _sims_schedule(sims_per_round, rounds)
-    if config.estimator == "fmpe" and rounds > 1 and not truncate:
-        raise ValueError("estimator='fmpe' has no atomic (APT) loss: use rounds=1 or truncate=True")
+    if isinstance(config.flow, FlowMatchingSettings) and rounds > 1 and not truncate:
+        raise ValueError("flow matching has no atomic (APT) loss: use rounds=1 or truncate=True")
     mesh = data_mesh() if mesh is None else mesh
     problem = _Problem(simulate, prior, x_o, embedding, config, truncate, on_epoch_end, mesh)
     if state is None:
@@ -126,16 +126,15 @@ def _run_round(problem: _Problem, state: APTState, r: int, n: int) -> APTState:
     info.update(proposal_info)
     theta, x, sim_info = _simulate_kept(problem, k_sim, theta, n)
     info.update(sim_info)
-    all_theta, all_x, round_ids, is_val = _append_round(state, theta, x, r, k_split, problem.config)
+    fraction = problem.config.training.validation_fraction
+    all_theta, all_x, round_ids, is_val = _append_round(state, theta, x, r, k_split, fraction)
     previous = state.history[-1] if state.history else None
-    patience = _round_patience(problem.config, round_ids, is_val, r, previous)
+    config = problem.config
+    patience = _round_patience(config.training, config.sequential, round_ids, is_val, r, previous)
     flow, fit_info = _train_round(
         problem, state.flow, r, k_init, k_train, all_theta, all_x, round_ids, is_val, patience
     )
-    # fold_in, not a sixth split: the other keys, and so runs without the guard, stay as they were
-    k_guard = jax.random.fold_in(k_round, 1)
-    flow, guard_info = _guard_leak(problem, state.flow, flow, info.get("box_mass"), k_guard)
-    info.update(fit_info, **guard_info, train_s=time.perf_counter() - t0)
+    info.update(fit_info, train_s=time.perf_counter() - t0)
     return APTState(
         round=r + 1,
         key=k_next,
@@ -155,42 +154,17 @@ def _propose(
     if r == 0 or flow is None:
         return problem.prior.sample(key, n), {"proposal": "prior"}
     if problem.truncate:
-        theta, tinfo = truncated_prior(key, flow, problem.prior, problem.x_o, n, problem.config)
+        seq = problem.config.sequential
+        theta, tinfo = truncated_prior(
+            key, flow, problem.prior, problem.x_o, n, seq.truncation_epsilon, seq.truncation_samples
+        )
         return theta, {"proposal": "truncated_prior", **tinfo}
     k_draw, k_mass = jax.random.split(key)
     mass = float(_box_mass(flow, k_mass, problem.x_o, _BOX_MASS_DRAWS))
-    if mass < problem.config.min_proposal_box_mass:
-        # A leaked posterior's rejection sampler repeats its few draws in the box, and a
-        # round trained on such data failed (slcp 10⁵ observation 4: C2ST 1.000). The atomic
-        # loss is valid under any proposal, so this round falls back to the prior.
-        return problem.prior.sample(k_draw, n), {"proposal": "prior (leaked)", "box_mass": mass}
     return _sample(flow, k_draw, problem.x_o, n), {"proposal": "posterior", "box_mass": mass}
 
 
 _BOX_MASS_DRAWS = 10_000
-
-
-def _guard_leak(
-    problem: _Problem,
-    previous: ConditionalFlow | None,
-    trained: ConditionalFlow,
-    proposal_mass: float | None,
-    key: PRNGKeyArray,
-) -> tuple[ConditionalFlow, dict[str, Any]]:
-    """Keep ``previous`` if training moved q(θ | x_o)'s mass out of the box (``min_box_mass_ratio``).
-
-    The atomic loss cannot see mass outside the box with the flow on θ, and the penalty on it
-    grows with the squared distance, so a posterior resting on a face can slide across it
-    unchecked (gaussian_mixture 10⁵ observation 10, x_o 0.8 from a corner: 92 % in the box after
-    round 7, 39 % after round 8, C2ST 0.592 against 0.510 without any penalty). A round that
-    halves the mass where its own proposal drew cannot have learnt that from its data.
-    """
-    ratio = problem.config.min_box_mass_ratio
-    if ratio == 0.0 or previous is None or proposal_mass is None:
-        return trained, {}
-    mass = float(_box_mass(trained, key, problem.x_o, _BOX_MASS_DRAWS))
-    reverted = mass < ratio * proposal_mass
-    return (previous if reverted else trained), {"box_mass_after": mass, "reverted": reverted}
 
 
 @eqx.filter_jit
@@ -219,11 +193,11 @@ def _simulate_kept(
 
 
 def _append_round(
-    state: APTState, theta: np.ndarray, x: np.ndarray, r: int, key: PRNGKeyArray, config: NPEConfig
+    state: APTState, theta: np.ndarray, x: np.ndarray, r: int, key: PRNGKeyArray, fraction: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``state``'s data plus round ``r``'s kept draws, a random share of them held out for validation."""
+    """``state``'s data plus round ``r``'s kept draws, a ``fraction`` of them held out for validation."""
     m = theta.shape[0]
-    n_val = max(1, int(round(config.validation_fraction * m)))
+    n_val = max(1, int(round(fraction * m)))
     is_val_new = np.zeros(m, bool)
     is_val_new[np.asarray(jax.random.permutation(key, m))[:n_val]] = True
     return (
@@ -246,22 +220,25 @@ def _train_round(
     is_val: np.ndarray,
     patience: int,
 ) -> tuple[ConditionalFlow, dict[str, Any]]:
-    """Train the flow on all kept data (a new one from ``k_init`` if none or retraining from scratch)."""
-    config = problem.config
-    fresh = flow is None or config.retrain_from_scratch
-    schedule = config.lr_schedule if fresh else "constant"  # see NPEConfig.lr_schedule
+    """Train the flow on all kept data (a new one from ``k_init`` in round 1)."""
+    config, seq = problem.config, problem.config.sequential
+    fresh = flow is None
     if fresh:
-        flow = build_flow(k_init, problem.prior, problem.embedding, theta[~is_val], x[~is_val], config)
-    max_epochs = config.max_epochs if fresh else _later_max_epochs(config, round_ids, is_val, r)
+        flow = build_flow(k_init, problem.prior, problem.embedding, theta[~is_val], x[~is_val], config.flow)
+        training = dataclasses.replace(config.training, patience=patience)
+    else:  # see TrainingSettings.lr_schedule
+        max_epochs = _later_max_epochs(config.training, seq, round_ids, is_val, r)
+        training = dataclasses.replace(
+            config.training, max_epochs=max_epochs, patience=patience, lr_schedule="constant"
+        )
     if r == 0 or problem.truncate:
-        loss = first_round_loss(config)
+        loss = first_round_loss(config.flow)
     else:
         loss = AtomicLoss(
-            num_atoms=config.num_atoms,
-            combined=config.combined_loss,
-            leak_weight=config.leak_weight,
-            leak_rows=config.leak_rows,
-            leak_at=np.asarray(problem.x_o) if config.leak_at_observation else None,
+            num_atoms=seq.num_atoms,
+            leak_weight=seq.leak_weight,
+            leak_rows=seq.leak_rows,
+            leak_at=np.asarray(problem.x_o) if seq.leak_at_observation else None,
         )
     flow, finfo = fit(
         k_train,
@@ -271,29 +248,27 @@ def _train_round(
         round_ids == 0,
         is_val,
         loss,
-        batch_size=config.batch_size,
-        learning_rate=config.learning_rate,
-        weight_decay=config.weight_decay,
-        clip_norm=config.clip_norm,
-        max_epochs=max_epochs,
-        patience=patience,
+        training,
         on_epoch_end=problem.on_epoch_end,
         round_index=r,
         mesh=problem.mesh,
-        lr_schedule=schedule,
-        average_epochs=config.average_epochs,
     )
-    info = {"loss": type(loss).__name__, "patience": patience, "lr_schedule": schedule}
-    return flow, {**finfo, **info, "max_epochs": max_epochs}
+    info = {"loss": type(loss).__name__, "patience": patience, "lr_schedule": training.lr_schedule}
+    return flow, {**finfo, **info, "max_epochs": training.max_epochs}
 
 
 _MIN_PATIENCE = 2
 
 
 def _round_patience(
-    config: NPEConfig, round_ids: np.ndarray, is_val: np.ndarray, r: int, previous: dict | None
+    training: TrainingSettings,
+    seq: SequentialSettings,
+    round_ids: np.ndarray,
+    is_val: np.ndarray,
+    r: int,
+    previous: dict | None,
 ) -> int:
-    """Early-stopping patience in epochs for round ``r`` (see ``NPEConfig.patience_unit``).
+    """Early-stopping patience in epochs for round ``r`` (see ``SequentialSettings.patience_unit``).
 
     A flow carried over from a previous round that stopped early has already fitted the older
     draws; how many updates it needs to take in a round's new draws scales with their number,
@@ -303,15 +278,15 @@ def _round_patience(
     it anyway, two_moons 2 × 1500 at 40 epochs scored C2ST 0.72 instead of 0.66).
     """
     # a decaying schedule that ran its course ended on small steps: converged by design
-    ran_out = previous is not None and previous["epochs"] >= previous.get("max_epochs", config.max_epochs)
+    ran_out = previous is not None and previous["epochs"] >= previous.get("max_epochs", training.max_epochs)
     decayed = previous is not None and previous.get("lr_schedule", "constant") != "constant"
     converged = previous is not None and (not ran_out or decayed)
-    if config.patience_unit == "epochs" or config.retrain_from_scratch or not converged:
-        return config.patience
+    if seq.patience_unit == "epochs" or not converged:
+        return training.patience
     num_new, num_all = _new_and_all(round_ids, is_val, r)
-    scaled = math.ceil(config.patience * num_new / num_all)
+    scaled = math.ceil(training.patience * num_new / num_all)
     # at least two epochs: one noisy validation epoch must not end a round
-    return min(config.patience, max(_MIN_PATIENCE, scaled))
+    return min(training.patience, max(_MIN_PATIENCE, scaled))
 
 
 def _new_and_all(round_ids: np.ndarray, is_val: np.ndarray, r: int) -> tuple[int, int]:
@@ -320,11 +295,13 @@ def _new_and_all(round_ids: np.ndarray, is_val: np.ndarray, r: int) -> tuple[int
     return int(np.sum(train & (round_ids == r))), max(int(np.sum(train)), 1)
 
 
-def _later_max_epochs(config: NPEConfig, round_ids: np.ndarray, is_val: np.ndarray, r: int) -> int:
-    """Epoch cap of round ``r`` continuing a trained flow (see ``NPEConfig.later_max_epochs``)."""
-    if config.later_max_epochs is None:
-        return config.max_epochs
+def _later_max_epochs(
+    training: TrainingSettings, seq: SequentialSettings, round_ids: np.ndarray, is_val: np.ndarray, r: int
+) -> int:
+    """Epoch cap of round ``r`` continuing a trained flow (see ``SequentialSettings.later_max_epochs``)."""
+    if seq.later_max_epochs is None:
+        return training.max_epochs
     # rounded, not ceil'd: one invalid draw must not add an epoch (15.002 -> 16)
     num_new, num_all = _new_and_all(round_ids, is_val, r)
-    capped = round(config.later_max_epochs * num_new / num_all)
-    return min(config.max_epochs, max(_MIN_PATIENCE, capped))
+    capped = round(seq.later_max_epochs * num_new / num_all)
+    return min(training.max_epochs, max(_MIN_PATIENCE, capped))

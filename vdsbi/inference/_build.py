@@ -9,9 +9,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import PRNGKeyArray
 
-from ._config import NPEConfig
+from ._config import FlowMatchingSettings, SplineFlowSettings
 from ._embeddings import AbstractEmbedding
-from ._ensemble import FlowEnsemble
 from ._flow import ConditionalFlow
 from ._flow_matching import FlowMatchingEstimator, FlowMatchingLoss
 from ._loss import MaximumLikelihoodLoss
@@ -25,35 +24,32 @@ def build_flow(
     embedding: AbstractEmbedding,
     theta: np.ndarray,
     x: np.ndarray,
-    config: NPEConfig,
-) -> ConditionalFlow | FlowEnsemble:
-    """A fresh flow (``config.ensemble > 1``: an ensemble of them, sharing the standardisations)
-    whose θ (logit- or θ-scale) and x standardisations are fitted on ``theta``/``x``."""
-    z = jnp.asarray(theta)
-    if config.theta_map == "logit":
-        z, _ = jax.vmap(prior.to_unbounded)(z)
-    x_standardizer = Standardizer.fit(jnp.asarray(x), config.x_standardize)
+    settings: SplineFlowSettings | FlowMatchingSettings,
+) -> ConditionalFlow | FlowMatchingEstimator:
+    """A fresh estimator of ``settings``' kind whose θ (in the space of ``settings.theta_map``)
+    and x standardisations are fitted on ``theta``/``x``."""
+    z, _ = jax.vmap(lambda t: settings.theta_map.forward(prior, t))(jnp.asarray(theta))
+    x_standardizer = Standardizer.fit(jnp.asarray(x), settings.x_standardize)
     # data-dependent initialisation of the embedding (a fixed subset bounds the cost)
     embedding = embedding.calibrate(jax.vmap(x_standardizer)(jnp.asarray(x[:2048])))
     theta_standardizer = Standardizer.fit(z, "channel")
 
-    parts = (prior, embedding, x.shape[1:], config, theta_standardizer, x_standardizer)
+    parts = (prior, embedding, x.shape[1:], settings, theta_standardizer, x_standardizer)
     return _init_compiled(key, parts)
 
 
-def _make(key, prior, embedding, x_shape, config, theta_standardizer, x_standardizer):
-    """One estimator of ``config``'s kind, its weights drawn from ``key``."""
-    if config.estimator == "fmpe":
+def _make(key, prior, embedding, x_shape, settings, theta_standardizer, x_standardizer):
+    """One estimator of ``settings``' kind, its weights drawn from ``key``."""
+    if isinstance(settings, FlowMatchingSettings):
         return FlowMatchingEstimator(
             key,
             prior,
             embedding,
             x_shape,
-            hidden=config.fmpe_hidden,
-            num_blocks=config.fmpe_num_blocks,
-            ode_steps=config.fmpe_ode_steps,
-            time_power=config.fmpe_time_power,
-            theta_map=config.theta_map,
+            hidden=settings.hidden,
+            num_blocks=settings.num_blocks,
+            ode_steps=settings.ode_steps,
+            theta_map=settings.theta_map,
             theta_standardizer=theta_standardizer,
             x_standardizer=x_standardizer,
         )
@@ -62,26 +58,17 @@ def _make(key, prior, embedding, x_shape, config, theta_standardizer, x_standard
         prior,
         embedding,
         x_shape,
-        num_layers=config.num_layers,
-        num_bins=config.num_bins,
-        hidden=config.hidden,
-        num_blocks=config.num_blocks,
-        tail_bound=config.tail_bound,
-        use_lu=config.use_lu,
-        context_gating=config.context_gating,
-        theta_map=config.theta_map,
+        num_layers=settings.num_layers,
+        num_bins=settings.num_bins,
+        hidden=settings.hidden,
+        num_blocks=settings.num_blocks,
+        tail_bound=settings.tail_bound,
+        use_lu=settings.use_lu,
+        context_gating=settings.context_gating,
+        theta_map=settings.theta_map,
         theta_standardizer=theta_standardizer,
         x_standardizer=x_standardizer,
     )
-
-
-def _make_estimator(key, *parts):
-    """`_make`, or with ``config.ensemble > 1`` an ensemble of them (members share the
-    embedding's initial weights, not the flows')."""
-    config = parts[3]
-    if config.ensemble > 1:
-        return FlowEnsemble(lambda k: _make(k, *parts), jax.random.split(key, config.ensemble))
-    return _make(key, *parts)
 
 
 # XLA's CPU backend at optimisation level 1 (default 2+), for the initialisation only: the
@@ -100,13 +87,13 @@ def _init_program(backend: str, treedef, leaves: tuple) -> Callable:
     static = jax.tree_util.tree_unflatten(treedef, leaves)
 
     def arrays(key, dynamic):
-        return eqx.filter(_make_estimator(key, *eqx.combine(dynamic, static)), eqx.is_array)
+        return eqx.filter(_make(key, *eqx.combine(dynamic, static)), eqx.is_array)
 
     return jax.jit(arrays, compiler_options=_INIT_CPU_OPTIONS if backend == "cpu" else None)
 
 
 def _init_compiled(key: PRNGKeyArray, parts: tuple):
-    """``_make_estimator(key, *parts)`` as one compiled program (on the CPU at XLA optimisation
+    """``_make(key, *parts)`` as one compiled program (on the CPU at XLA optimisation
     level 1), compiled once per static structure of ``parts``.
 
     Built op by op, the initialisation would compile dozens of small kernels; as one program
@@ -120,11 +107,13 @@ def _init_compiled(key: PRNGKeyArray, parts: tuple):
     except TypeError:  # an unhashable non-array leaf (e.g. in a user's embedding): not cached
         program = _init_program.__wrapped__(jax.default_backend(), treedef, tuple(leaves))
     arrays = program(key, dynamic)
-    shapes = eqx.filter_eval_shape(_make_estimator, key, *parts)
+    shapes = eqx.filter_eval_shape(_make, key, *parts)
     static_out = eqx.filter(shapes, lambda a: isinstance(a, jax.ShapeDtypeStruct), inverse=True)
     return eqx.combine(arrays, static_out)
 
 
-def first_round_loss(config: NPEConfig) -> MaximumLikelihoodLoss | FlowMatchingLoss:
+def first_round_loss(
+    settings: SplineFlowSettings | FlowMatchingSettings,
+) -> MaximumLikelihoodLoss | FlowMatchingLoss:
     """The loss on prior (or truncated-prior) draws: maximum likelihood, or flow matching."""
-    return FlowMatchingLoss() if config.estimator == "fmpe" else MaximumLikelihoodLoss()
+    return FlowMatchingLoss() if isinstance(settings, FlowMatchingSettings) else MaximumLikelihoodLoss()

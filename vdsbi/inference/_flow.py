@@ -2,13 +2,11 @@
 
 Density of θ given x, for ONE θ and ONE x (vmap outside):
 
-    θ ∈ box --logit--> z --standardise--> z' --[coupling RQ-spline, LU-linear] × L--> ε ~ N(0, I)
+    θ ∈ box --theta_map--> z --standardise--> z' --[coupling RQ-spline, LU-linear] × L--> ε ~ N(0, I)
 
-conditioned on ``c = embedding(standardise(x))``. With ``theta_map="logit"`` (default) the box
-map is a fixed bijection, so the density is zero outside the prior box and samples always lie
-inside it. With ``theta_map="affine"`` (as sbi) z = θ: the flow lives on R^d, its density is set
-to zero outside the box WITHOUT renormalising (the mass leaking out is lost; ratios at one x,
-e.g. the APT loss, are unaffected) and samples are drawn by rejection.
+conditioned on ``c = embedding(standardise(x))``. The box map is a `LogitMap` (default: the
+density is zero outside the prior box and samples always lie inside it) or an `IdentityMap`
+(as sbi: the flow lives on θ, its density is cut at the box and samples are drawn by rejection).
 Layers are stacked with ``eqx.filter_vmap`` and applied with ``lax.scan``.
 """
 
@@ -23,9 +21,9 @@ from jaxtyping import Array, Bool, Float, PRNGKeyArray
 
 from ._embeddings import AbstractEmbedding, embedding_from_spec
 from ._prior import BoxPrior
-from ._rejection import box_rejection
 from ._spline import num_spline_params, rq_spline_forward, rq_spline_inverse
 from ._standardize import Standardizer
+from ._theta_map import AbstractThetaMap, LogitMap, theta_map_from_name
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -192,9 +190,8 @@ class ConditionalFlow(eqx.Module):
         context_gating: the context also gates every residual block of the conditioners
             (as nflows/sbi's NSF); default False (context through the first layer only).
         theta_standardizer: affine map in the unbounded (logit, or θ) space, shape ``(d,)``.
-        theta_map: ``"logit"`` (box → R^d bijection) or ``"affine"`` (flow on θ itself; sbi's
-            choice: a thin curved posterior is not bent further by the logit). two_moons at
-            10⁴, NPE: see ``benchmarks/results/vs_sbi.md``.
+        theta_map: `LogitMap` (box → R^d bijection) or `IdentityMap` (flow on θ itself; sbi's
+            choice: a thin curved posterior is not bent further by the logit).
         x_standardizer: applied to x before the embedding.
     """
 
@@ -212,7 +209,7 @@ class ConditionalFlow(eqx.Module):
     tail_bound: float = eqx.field(static=True)
     use_lu: bool = eqx.field(static=True)
     context_gating: bool = eqx.field(static=True)
-    theta_map: str = eqx.field(static=True)
+    theta_map: AbstractThetaMap
 
     def __init__(
         self,
@@ -228,7 +225,7 @@ class ConditionalFlow(eqx.Module):
         tail_bound: float = 3.0,
         use_lu: bool = True,
         context_gating: bool = False,
-        theta_map: str = "logit",
+        theta_map: AbstractThetaMap = LogitMap(),
         theta_standardizer: Standardizer | None = None,
         x_standardizer: Standardizer | None = None,
     ):
@@ -237,8 +234,8 @@ class ConditionalFlow(eqx.Module):
         self.num_layers, self.num_bins, self.hidden = int(num_layers), int(num_bins), int(hidden)
         self.num_blocks, self.tail_bound, self.use_lu = int(num_blocks), float(tail_bound), bool(use_lu)
         self.context_gating = bool(context_gating)
-        if theta_map not in ("logit", "affine"):
-            raise ValueError(f"theta_map must be 'logit' or 'affine', got {theta_map!r}")
+        if not isinstance(theta_map, AbstractThetaMap):
+            raise TypeError(f"theta_map must be a LogitMap or an IdentityMap, got {theta_map!r}")
         self.theta_map = theta_map
         self.prior = prior
         self.embedding = embedding
@@ -288,10 +285,7 @@ class ConditionalFlow(eqx.Module):
         """``log q(θ | x)`` for ONE θ given a precomputed context; ``-inf`` outside the box."""
         inside = jnp.all((theta >= self.prior.low) & (theta <= self.prior.high))
         safe = jnp.where(inside, theta, 0.5 * (self.prior.low + self.prior.high))
-        if self.theta_map == "logit":
-            z, ld_box = self.prior.to_unbounded(safe)
-        else:
-            z, ld_box = safe, jnp.zeros((), safe.dtype)
+        z, ld_box = self.theta_map.forward(self.prior, safe)
         zs = self.theta_standardizer(z)
         eps, ld_flow = self._to_noise(zs, context)
         base = -0.5 * jnp.sum(eps**2) - 0.5 * self.dim * _LOG_2PI
@@ -304,29 +298,25 @@ class ConditionalFlow(eqx.Module):
 
     def unmasked_draw(self, eps: Float[Array, " d"], context: Float[Array, " c"]) -> Float[Array, " d"]:
         """The flow's draw for ONE base-noise vector, before any box constraint: always inside
-        the box with ``theta_map="logit"``; with ``"affine"`` possibly outside it (a leak).
+        the box with a `LogitMap`; with an `IdentityMap` possibly outside it (a leak).
         Differentiable in the flow's parameters (reparameterised)."""
         zs, _ = self._from_noise(eps, context)
-        z = self.theta_standardizer.inverse(zs)
-        return self.prior.from_unbounded(z) if self.theta_map == "logit" else z
+        return self.theta_map.inverse(self.prior, self.theta_standardizer.inverse(zs))
 
-    def box_mass(self, key: PRNGKeyArray, context: Float[Array, " c"], n: int) -> Float[Array, ""]:
-        """Monte-Carlo share of the flow's mass inside the prior box, from ``n`` draws: 1 with
-        ``theta_map="logit"``; with ``"affine"``, the acceptance rate of `sample`'s rejection."""
-        if self.theta_map == "logit":  # the box map keeps every draw inside: nothing to draw
-            return jnp.ones((), self.prior.low.dtype)
-        eps = jax.random.normal(key, (n, self.dim), dtype=self.prior.low.dtype)
-        draws = jax.vmap(lambda e: self.unmasked_draw(e, context))(eps)
-        return jnp.mean(jnp.all((draws >= self.prior.low) & (draws <= self.prior.high), axis=1))
-
-    def sample_context(self, key: PRNGKeyArray, context: Float[Array, " c"], n: int) -> Float[Array, "n d"]:
+    def _draw(self, context: Float[Array, " c"], n: int):
         def draw(k):
             eps = jax.random.normal(k, (n, self.dim), dtype=self.prior.low.dtype)
             return jax.vmap(lambda e: self.unmasked_draw(e, context))(eps)
 
-        if self.theta_map == "logit":
-            return draw(key)
-        return box_rejection(draw, self.prior, key, n)
+        return draw
+
+    def box_mass(self, key: PRNGKeyArray, context: Float[Array, " c"], n: int) -> Float[Array, ""]:
+        """Monte-Carlo share of the flow's mass inside the prior box, from ``n`` draws: 1 with a
+        `LogitMap`; with an `IdentityMap`, the acceptance rate of `sample`'s rejection."""
+        return self.theta_map.box_mass(self._draw(context, n), self.prior, key)
+
+    def sample_context(self, key: PRNGKeyArray, context: Float[Array, " c"], n: int) -> Float[Array, "n d"]:
+        return self.theta_map.sample(self._draw(context, n), self.prior, key, n)
 
     def sample(self, key: PRNGKeyArray, x: Float[Array, "..."], n: int) -> Float[Array, "n d"]:
         """``n`` draws of θ from ``q(θ | x)`` for ONE x; always strictly inside the prior box."""
@@ -348,7 +338,7 @@ class ConditionalFlow(eqx.Module):
             "tail_bound": self.tail_bound,
             "use_lu": self.use_lu,
             "context_gating": self.context_gating,
-            "theta_map": self.theta_map,
+            "theta_map": self.theta_map.name,
             "embedding": [type(self.embedding).__name__, self.embedding.spec()],
         }
 
@@ -361,3 +351,23 @@ def skeleton_parts(spec: dict[str, Any]) -> tuple[BoxPrior, AbstractEmbedding, t
     xs = tuple(spec["x_std_shape"])
     xstd = Standardizer(mean=jnp.zeros(xs), std=jnp.ones(xs))
     return prior, embedding_from_spec(name, espec), tuple(spec["x_shape"]), xstd
+
+
+def flow_from_spec(spec: dict[str, Any]) -> ConditionalFlow:
+    """Skeleton :class:`ConditionalFlow` with the structure in ``spec``."""
+    prior, embedding, x_shape, xstd = skeleton_parts(spec)
+    return ConditionalFlow(
+        jax.random.key(0),
+        prior,
+        embedding,
+        x_shape,
+        num_layers=spec["num_layers"],
+        num_bins=spec["num_bins"],
+        hidden=spec["hidden"],
+        num_blocks=spec["num_blocks"],
+        tail_bound=spec["tail_bound"],
+        use_lu=spec["use_lu"],
+        context_gating=spec.get("context_gating", False),  # absent in older files
+        theta_map=theta_map_from_name(spec.get("theta_map", "logit")),
+        x_standardizer=xstd,
+    )

@@ -2,13 +2,14 @@
 
 A conditional vector field ``v(t, z, c)`` transports noise ``z_0 ~ N(0, I)`` at ``t = 0`` to the
 posterior at ``t = 1`` along ``dz/dt = v``. ``z`` is θ mapped exactly as the spline flow maps it
-(`ConditionalFlow`): ``"logit"`` of the prior box then standardised, or ``"affine"`` (θ itself,
-standardised; density cut at the box without renormalising, samples by rejection). Training
+(`ConditionalFlow`): by its `LogitMap` or `IdentityMap`, then standardised. Training
 regresses ``v`` on the optimal-transport (Gaussian) conditional path of Lipman et al. (2023),
 
     z_t = (1 - (1 - σ_min) t) z_0 + t z_1,    target  u = z_1 - (1 - σ_min) z_0,
 
-with ``z_1`` a training θ and ``c = embedding(standardise(x))``: no ODE is solved in training.
+with ``z_1`` a training θ, ``c = embedding(standardise(x))`` and training times of density
+``2t`` on [0, 1] (more of them near the data end, where the field is hardest): no ODE is
+solved in training.
 Sampling integrates the ODE from noise; ``log q`` integrates it backwards with the exact
 divergence (instantaneous change of variables; ``jax.jacfwd``, d forward-mode passes, meant for
 small d). Both use diffrax's Tsit5 with ``ode_steps`` fixed steps.
@@ -27,8 +28,8 @@ from ._embeddings import AbstractEmbedding
 from ._flow import skeleton_parts
 from ._loss import AbstractLoss
 from ._prior import BoxPrior
-from ._rejection import box_rejection
 from ._standardize import Standardizer
+from ._theta_map import AbstractThetaMap, LogitMap, theta_map_from_name
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -111,10 +112,8 @@ class FlowMatchingEstimator(eqx.Module):
         x_shape: shape of ONE observation.
         hidden, num_blocks, num_freqs: vector-field width, residual blocks, time frequencies.
         ode_steps: fixed Tsit5 steps over ``t ∈ [0, 1]`` for sampling and ``log_prob``.
-        time_power: training times have density ∝ ``t^time_power`` on [0, 1] (0: uniform;
-            larger puts more training near the data end, where the field is hardest).
         sigma_min: width of the conditional path at ``t = 1``.
-        theta_map: ``"logit"`` or ``"affine"``, as for `ConditionalFlow`.
+        theta_map: `LogitMap` or `IdentityMap`, as for `ConditionalFlow`.
         theta_standardizer: affine map in the unbounded (logit, or θ) space, shape ``(d,)``.
         x_standardizer: applied to x before the embedding.
     """
@@ -130,9 +129,8 @@ class FlowMatchingEstimator(eqx.Module):
     num_blocks: int = eqx.field(static=True)
     num_freqs: int = eqx.field(static=True)
     ode_steps: int = eqx.field(static=True)
-    time_power: float = eqx.field(static=True)
     sigma_min: float = eqx.field(static=True)
-    theta_map: str = eqx.field(static=True)
+    theta_map: AbstractThetaMap
 
     def __init__(
         self,
@@ -145,16 +143,15 @@ class FlowMatchingEstimator(eqx.Module):
         num_blocks: int = 3,
         num_freqs: int = 4,
         ode_steps: int = 10,
-        time_power: float = 1.0,
         sigma_min: float = 1e-4,
-        theta_map: str = "logit",
+        theta_map: AbstractThetaMap = LogitMap(),
         theta_standardizer: Standardizer | None = None,
         x_standardizer: Standardizer | None = None,
     ):
         self.dim = prior.dim
         self.x_shape = tuple(int(s) for s in x_shape)
         self.hidden, self.num_blocks, self.num_freqs = int(hidden), int(num_blocks), int(num_freqs)
-        self.ode_steps, self.time_power, self.sigma_min = int(ode_steps), float(time_power), float(sigma_min)
+        self.ode_steps, self.sigma_min = int(ode_steps), float(sigma_min)
         self.theta_map = theta_map
         self.prior = prior
         self.embedding = embedding
@@ -165,10 +162,10 @@ class FlowMatchingEstimator(eqx.Module):
         )
 
     def __check_init__(self):
-        if self.theta_map not in ("logit", "affine"):
-            raise ValueError(f"theta_map must be 'logit' or 'affine', got {self.theta_map!r}")
-        if self.ode_steps < 1 or self.time_power < 0.0 or not 0.0 <= self.sigma_min < 1.0:
-            raise ValueError("need ode_steps >= 1, time_power >= 0 and 0 <= sigma_min < 1")
+        if not isinstance(self.theta_map, AbstractThetaMap):
+            raise TypeError(f"theta_map must be a LogitMap or an IdentityMap, got {self.theta_map!r}")
+        if self.ode_steps < 1 or not 0.0 <= self.sigma_min < 1.0:
+            raise ValueError("need ode_steps >= 1 and 0 <= sigma_min < 1")
 
     # ---- one example -------------------------------------------------------------------------
     def context(self, x: Float[Array, "..."]) -> Float[Array, " c"]:
@@ -177,22 +174,19 @@ class FlowMatchingEstimator(eqx.Module):
 
     def _to_z(self, theta):
         """θ (inside the box) to the standardised space the ODE lives in, and ``log|dz/dθ|``."""
-        if self.theta_map == "logit":
-            u, ld = self.prior.to_unbounded(theta)
-        else:
-            u, ld = theta, jnp.zeros((), theta.dtype)
+        u, ld = self.theta_map.forward(self.prior, theta)
         return self.theta_standardizer(u), ld + self.theta_standardizer.log_det()
 
     def _from_z(self, z):
         u = self.theta_standardizer.inverse(z)
-        return self.prior.from_unbounded(u) if self.theta_map == "logit" else u
+        return self.theta_map.inverse(self.prior, u)
 
     def loss(
         self, key: PRNGKeyArray, theta: Float[Array, " d"], context: Float[Array, " c"]
     ) -> Float[Array, ""]:
         """Conditional flow-matching loss of ONE pair: ``|v(t, z_t, c) - u|²`` at a random ``t``."""
         k_t, k_z = jax.random.split(key)
-        t = jax.random.uniform(k_t, (), theta.dtype) ** (1.0 / (1.0 + self.time_power))
+        t = jax.random.uniform(k_t, (), theta.dtype) ** 0.5  # density 2t on [0, 1]
         z1, _ = self._to_z(theta)
         z0 = jax.random.normal(k_z, z1.shape, z1.dtype)
         zt = (1.0 - (1.0 - self.sigma_min) * t) * z0 + t * z1
@@ -232,9 +226,7 @@ class FlowMatchingEstimator(eqx.Module):
             z0 = jax.random.normal(k, (n, self.dim), dtype=self.prior.low.dtype)
             return jax.vmap(self._from_z)(self.transport(z0, context, 0.0, 1.0))
 
-        if self.theta_map == "logit":
-            return draw(key)
-        return box_rejection(draw, self.prior, key, n)
+        return self.theta_map.sample(draw, self.prior, key, n)
 
     def sample(self, key: PRNGKeyArray, x: Float[Array, "..."], n: int) -> Float[Array, "n d"]:
         """``n`` draws of θ from ``q(θ | x)`` for ONE x; always inside the prior box."""
@@ -254,9 +246,8 @@ class FlowMatchingEstimator(eqx.Module):
             "num_blocks": self.num_blocks,
             "num_freqs": self.num_freqs,
             "ode_steps": self.ode_steps,
-            "time_power": self.time_power,
             "sigma_min": self.sigma_min,
-            "theta_map": self.theta_map,
+            "theta_map": self.theta_map.name,
             "embedding": [type(self.embedding).__name__, self.embedding.spec()],
         }
 
@@ -273,9 +264,8 @@ def fmpe_from_spec(spec: dict[str, Any]) -> FlowMatchingEstimator:
         num_blocks=spec["num_blocks"],
         num_freqs=spec["num_freqs"],
         ode_steps=spec["ode_steps"],
-        time_power=spec["time_power"],
         sigma_min=spec["sigma_min"],
-        theta_map=spec["theta_map"],
+        theta_map=theta_map_from_name(spec["theta_map"]),
         x_standardizer=xstd,
     )
 

@@ -6,7 +6,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jax.scipy.special import logsumexp
-from jaxtyping import Array, Bool, Float, Int, PRNGKeyArray
+from jaxtyping import Array, Float, Int, PRNGKeyArray
 
 
 def atom_indices(key: PRNGKeyArray, batch_size: int, num_atoms: int) -> Int[Array, "batch atoms"]:
@@ -28,7 +28,6 @@ def atomic_apt_loss(
     prior_log_prob: Callable[[Array], Array],
     theta: Float[Array, "batch d"],
     atoms: Int[Array, "batch atoms"],
-    prior_mask: Bool[Array, " batch"] | None = None,
 ) -> Float[Array, ""]:
     """Atomic APT loss (Greenberg et al. 2019), averaged over the batch.
 
@@ -36,28 +35,22 @@ def atomic_apt_loss(
 
         ℓ_i = -[ u_i(θ_i) - logsumexp_{θ ∈ A_i} u_i(θ) ],   u_i(θ) = log q(θ | x_i) - log p(θ)
 
-    and, if ``prior_mask`` is given, ``- log q(θ_i | x_i)`` is added for rows drawn from the prior
-    (the "combined" loss).
-
     Args:
         log_prob_fn: ``log_prob_fn(theta_one, i)`` = ``log q(θ | x_i)`` for the i-th example.
         prior_log_prob: ``prior_log_prob(theta_one)``.
         theta: the batch of parameters.
         atoms: from :func:`atom_indices`; column 0 must be the row itself.
-        prior_mask: True where the row's θ was drawn from the prior.
     """
     atom_theta = theta[atoms]  # (B, K, d)
     rows = jnp.arange(theta.shape[0])
     lq = jax.vmap(lambda th, i: jax.vmap(lambda t: log_prob_fn(t, i))(th))(atom_theta, rows)
-    return _atomic_from_log_probs(lq, jax.vmap(jax.vmap(prior_log_prob))(atom_theta), prior_mask)
+    return _atomic_from_log_probs(lq, jax.vmap(jax.vmap(prior_log_prob))(atom_theta))
 
 
-def _atomic_from_log_probs(lq, lp, prior_mask):
+def _atomic_from_log_probs(lq, lp):
     """The atomic loss from ``lq[i, k] = log q(θ_{A_ik} | x_i)`` and ``lp[i, k] = log p(θ_{A_ik})``."""
     u = lq - lp
     ll = u[:, 0] - logsumexp(u, axis=1)
-    if prior_mask is not None:
-        ll = ll + jnp.where(prior_mask, lq[:, 0], 0.0)
     return -jnp.mean(ll)
 
 
@@ -81,17 +74,16 @@ def leak_penalty(flow, key: PRNGKeyArray, contexts: Float[Array, "batch c"]) -> 
     of ``q(θ | x_i)`` per context: 0 iff (almost) all of the flow's mass lies in the box.
 
     The atomic loss compares densities only at atoms inside the box, so it cannot see mass the
-    flow puts outside (``theta_map="affine"``): that mass drifts freely, and where the posterior
-    rests against the box edge it ran to 99 % (slcp observation 7, 10⁴). The penalty selects,
-    among flows equal under the atomic loss, those that keep their mass in the box.
+    flow puts outside (an `IdentityMap`): that mass drifts freely. The penalty selects, among
+    flows equal under the atomic loss, those that keep their mass in the box. Always 0 with a
+    `LogitMap`, whose draws all lie in the box (nothing is drawn then).
     """
-    if flow.theta_map == "logit":  # the box map keeps every draw inside: nothing to draw
-        return jnp.zeros((), flow.prior.low.dtype)
-    eps = jax.random.normal(key, (contexts.shape[0], flow.dim), dtype=flow.prior.low.dtype)
-    draws = jax.vmap(flow.unmasked_draw)(eps, contexts)
-    width = flow.prior.high - flow.prior.low
-    excess = (jax.nn.relu(draws - flow.prior.high) + jax.nn.relu(flow.prior.low - draws)) / width
-    return jnp.mean(jnp.sum(excess**2, axis=-1))
+
+    def draw(k):
+        eps = jax.random.normal(k, (contexts.shape[0], flow.dim), dtype=flow.prior.low.dtype)
+        return jax.vmap(flow.unmasked_draw)(eps, contexts)
+
+    return flow.theta_map.leak(draw, flow.prior, key)
 
 
 def leak_rows_of(contexts: Float[Array, "batch c"], rows: int) -> Float[Array, "m c"]:
@@ -109,16 +101,16 @@ class AtomicLoss(AbstractLoss):
 
     ``leak_at`` (one example, e.g. the observation x_o; None: off) adds the same penalty on as
     many draws at its context: the batch's contexts are the proposal's, and a posterior that
-    leaks only at x_o (slcp 10⁵ observation 4) is penalised too weakly by them to stop it.
+    leaks only at x_o is penalised too weakly by them to stop it.
     """
 
     num_atoms: int = eqx.field(static=True, default=10)
-    combined: bool = eqx.field(static=True, default=False)
     leak_weight: float = eqx.field(static=True, default=0.0)
     leak_rows: int = eqx.field(static=True, default=0)
     leak_at: Float[Array, "..."] | None = None
 
     def __call__(self, flow, theta, x, prior_mask, key):
+        del prior_mask
         b = theta.shape[0]
         k = min(self.num_atoms, b)
         key, k_leak = jax.random.split(key) if self.leak_weight > 0 else (key, None)
@@ -132,7 +124,7 @@ class AtomicLoss(AbstractLoss):
             atom_theta.reshape(b * k, -1), pair_ctx.reshape(b * k, -1)
         ).reshape(b, k)
         lp = jax.vmap(jax.vmap(flow.prior.log_prob))(atom_theta)
-        loss = _atomic_from_log_probs(lq, lp, prior_mask if self.combined else None)
+        loss = _atomic_from_log_probs(lq, lp)
         if self.leak_weight > 0:
             rows = leak_rows_of(contexts, self.leak_rows)
             pen = leak_penalty(flow, k_leak, rows)

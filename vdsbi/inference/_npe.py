@@ -27,10 +27,10 @@ def npe(
     on_epoch_end: Callable[[int, int, float, float], None] | None = None,
 ) -> tuple[ConditionalFlow, dict[str, Any]]:
     """Train ``q(θ | x)`` on the pairs ``(theta, x)`` (prior draws): by maximum likelihood, or
-    by flow matching with ``config.estimator="fmpe"``.
+    by flow matching with ``config.flow`` a `FlowMatchingSettings`.
 
     The same estimator as round 1 of :func:`apt`, for a fixed set of simulations (e.g. to
-    compare with another toolkit on identical data). A random ``config.validation_fraction`` of
+    compare with another toolkit on identical data). A random ``validation_fraction`` of
     the pairs is held out for early stopping. Returns ``(flow, info)``; wrap the flow in a
     :class:`Posterior` to sample at an observation. ``on_epoch_end(0, epoch, train_loss,
     val_loss)`` is called after every epoch (progress, profiling).
@@ -41,25 +41,9 @@ def npe(
     k_split, k_init, k_train = jax.random.split(key, 3)
     m = theta.shape[0]
     is_val = np.zeros(m, bool)
-    n_val = max(1, round(config.validation_fraction * m))
+    n_val = max(1, round(config.training.validation_fraction * m))
     is_val[np.asarray(jax.random.permutation(k_split, m))[:n_val]] = True
-    flow = build_flow(k_init, prior, embedding, theta[~is_val], x[~is_val], config)
-    return fit(
-        k_train,
-        flow,
-        theta,
-        x,
-        np.ones(m, bool),
-        is_val,
-        first_round_loss(config),
-        batch_size=config.batch_size,
-        learning_rate=config.learning_rate,
-        weight_decay=config.weight_decay,
-        clip_norm=config.clip_norm,
-        max_epochs=config.max_epochs,
-        patience=config.patience,
-        mesh=mesh,
-        lr_schedule=config.lr_schedule,
-        average_epochs=config.average_epochs,
-        on_epoch_end=on_epoch_end,
-    )
+    flow = build_flow(k_init, prior, embedding, theta[~is_val], x[~is_val], config.flow)
+    loss = first_round_loss(config.flow)
+    data = (theta, x, np.ones(m, bool), is_val)
+    return fit(k_train, flow, *data, loss, config.training, mesh=mesh, on_epoch_end=on_epoch_end)

@@ -79,7 +79,7 @@ class Posterior(eqx.Module):
         return _sample(self.flow, key, self._x(x), int(n))
 
     def log_prob(self, theta: Float[Array, "*batch d"], x=None) -> Float[Array, "*batch"]:
-        """``log q(θ | x)``; ``-inf`` outside the prior box (with ``theta_map="affine"`` not
+        """``log q(θ | x)``; ``-inf`` outside the prior box (with an `IdentityMap` not
         renormalised for the flow's mass outside the box; see `ConditionalFlow`)."""
         theta = jnp.asarray(theta)
         batch = theta.shape[:-1]

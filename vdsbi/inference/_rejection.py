@@ -1,5 +1,5 @@
 """Rejection into the prior box: the one way both estimators on θ (the spline flow and the
-flow-matching estimator, ``theta_map="affine"``) turn their draws into posterior draws."""
+flow-matching estimator, with an `IdentityMap`) turn their draws into posterior draws."""
 
 import warnings
 from collections.abc import Callable
@@ -60,7 +60,7 @@ def _warn_if_short(count, n) -> None:
             f"only {short} of {n} posterior draws fell inside the prior box in "
             f"{_MAX_REJECTION_ROUNDS} rounds of rejection (under 1 % of the flow's mass lies in "
             "the box); the rest repeat them. The estimator has leaked out of the box: consider "
-            "theta_map='logit' or NPEConfig.leak_weight > 0.",
+            "theta_map=LogitMap() or SequentialSettings.leak_weight > 0.",
             RuntimeWarning,
             stacklevel=2,
         )

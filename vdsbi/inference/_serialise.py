@@ -9,8 +9,7 @@ from typing import Any
 import equinox as eqx
 import numpy as np
 
-from ._ensemble import flow_from_spec
-from ._flow import ConditionalFlow
+from ._flow import ConditionalFlow, flow_from_spec
 from ._flow_matching import fmpe_from_spec
 
 FORMAT_VERSION = 1
@@ -23,7 +22,7 @@ def flow_to_bytes(flow: ConditionalFlow) -> np.ndarray:
 
 
 def flow_from_bytes(spec: dict[str, Any], data: np.ndarray) -> ConditionalFlow:
-    """The estimator (spline flow, ensemble or `FlowMatchingEstimator`) described by ``spec``."""
+    """The estimator (spline flow or `FlowMatchingEstimator`) described by ``spec``."""
     skeleton = fmpe_from_spec(spec) if spec.get("estimator") == "fmpe" else flow_from_spec(spec)
     return eqx.tree_deserialise_leaves(io.BytesIO(np.asarray(data, np.uint8).tobytes()), skeleton)
 

@@ -1,6 +1,5 @@
 """Training loop: one jitted step, AdamW + clipping, validation split, early stopping."""
 
-import collections
 import concurrent.futures
 import functools
 import math
@@ -13,23 +12,27 @@ import numpy as np
 import optax
 from jaxtyping import PRNGKeyArray
 
-from ._ensemble import member_mean, trainable_filter
+from ._config import TrainingSettings
 from ._flow import ConditionalFlow
 from ._loss import AbstractLoss
 from ._sharding import data_mesh, replicate, stack_batches
 
-# Incremented at TRACE time (a Python side effect): a regression test asserts that
-# the step is traced once for fixed shapes, never once per call.
-TRACE_COUNTS: collections.Counter = collections.Counter()
+
+def make_optimizer(training: TrainingSettings) -> optax.GradientTransformation:
+    """``clip_by_global_norm`` then AdamW, from ``training``'s settings.
+
+    With ``lr_schedule="cosine"`` the learning rate is an entry of the optimiser state
+    (``optax.inject_hyperparams``) that `fit` sets every epoch, so a schedule never recompiles
+    the step. The same settings give the same object, so repeated fits reuse the compiled step.
+    """
+    scheduled = training.lr_schedule != "constant"
+    return _optimizer(
+        float(training.learning_rate), float(training.weight_decay), float(training.clip_norm), scheduled
+    )
 
 
 @functools.lru_cache(maxsize=32)
-def make_optimizer(learning_rate: float, weight_decay: float, clip_norm: float, scheduled: bool = False):
-    """``clip_by_global_norm`` then AdamW (cached so repeated fits reuse the jit cache).
-
-    ``scheduled``: the learning rate is an entry of the optimiser state (``inject_hyperparams``)
-    that `fit` sets every epoch, so a schedule never recompiles the step.
-    """
+def _optimizer(learning_rate: float, weight_decay: float, clip_norm: float, scheduled: bool):
     adamw = optax.inject_hyperparams(optax.adamw) if scheduled else optax.adamw
     return optax.chain(
         optax.clip_by_global_norm(clip_norm),
@@ -47,17 +50,31 @@ def epoch_learning_rate(learning_rate: float, schedule: str, epoch: int, max_epo
 
 
 def _set_learning_rate(opt_state, value: float):
-    """``opt_state`` of a ``scheduled`` optimiser with its learning rate set (placement kept)."""
-    clip_state, adam_state = opt_state
-    old = adam_state.hyperparams["learning_rate"]
+    """``opt_state`` with its injected ``learning_rate`` set to ``value`` (placement kept)."""
+    old = optax.tree_utils.tree_get(opt_state, "learning_rate")
+    if old is None:
+        raise ValueError(
+            "a learning-rate schedule needs an optimiser whose learning rate is an injected "
+            "hyperparameter (optax.inject_hyperparams), as make_optimizer builds it"
+        )
     new = jax.device_put(jnp.asarray(value, old.dtype), old.sharding)
-    hyper = dict(adam_state.hyperparams, learning_rate=new)
-    return clip_state, adam_state._replace(hyperparams=hyper)
+    return optax.tree_utils.tree_set(opt_state, learning_rate=new)
+
+
+def trainable_filter(flow: ConditionalFlow):
+    """Boolean pytree: True on the trained weights, False on the frozen prior and standardisations.
+
+    Any estimator with the fields ``prior``, ``theta_standardizer`` and ``x_standardizer`` (the
+    spline flow, `FlowMatchingEstimator`): every other inexact array is trained.
+    """
+    spec = jax.tree.map(eqx.is_inexact_array, flow)
+    frozen = lambda f: (f.prior, f.theta_standardizer, f.x_standardizer)  # noqa: E731
+    return eqx.tree_at(frozen, spec, replace=jax.tree.map(lambda _: False, frozen(spec)))
 
 
 def _update(params, static, opt_state, batch, key, loss: AbstractLoss, optimizer):
     def f(p):
-        return member_mean(loss, eqx.combine(p, static), *batch, key)
+        return loss(eqx.combine(p, static), *batch, key)
 
     value, grads = jax.value_and_grad(f)(params)
     updates, opt_state = optimizer.update(grads, opt_state, params)
@@ -67,7 +84,6 @@ def _update(params, static, opt_state, batch, key, loss: AbstractLoss, optimizer
 @eqx.filter_jit
 def train_step(flow: ConditionalFlow, opt_state, batch, key: PRNGKeyArray, loss: AbstractLoss, optimizer):
     """One optimisation step on ``batch = (theta, x, prior_mask)``; returns ``(flow, opt_state, loss)``."""
-    TRACE_COUNTS["train_step"] += 1
     params, static = eqx.partition(flow, trainable_filter(flow))
     params, opt_state, value = _update(params, static, opt_state, batch, key, loss, optimizer)
     return eqx.combine(params, static), opt_state, value
@@ -88,7 +104,6 @@ def train_steps(
     Returns ``(flow, opt_state, mean loss)`` (the mean over live steps), and the updated average
     flow last when ``average`` is given.
     """
-    TRACE_COUNTS["train_steps"] += 1
     params, static = eqx.partition(flow, trainable_filter(flow))
     live = jnp.ones(keys.shape[0], bool) if live is None else live
     dtype = jax.tree.leaves(params)[0].dtype
@@ -122,11 +137,10 @@ def eval_steps(flow: ConditionalFlow, batches, key: PRNGKeyArray, loss: Abstract
     """Mean loss over ``(num_batches, batch, ...)`` validation batches (the ``live`` ones), in one
     compiled loop; padding batches are skipped, not evaluated (at 10³ simulations one live batch
     in a block of 32 cost as much as the epoch's training)."""
-    TRACE_COUNTS["eval_steps"] += 1
     live = jnp.ones(jax.tree.leaves(batches)[0].shape[0], bool) if live is None else live
 
     def value(b):
-        return member_mean(loss, flow, *b, key)
+        return loss(flow, *b, key)
 
     out = jax.eval_shape(value, jax.tree.map(lambda a: a[0], batches))
 
@@ -247,21 +261,19 @@ def fit(
     prior_mask: np.ndarray,
     is_val: np.ndarray,
     loss: AbstractLoss,
+    training: TrainingSettings,
+    optimizer: optax.GradientTransformation | None = None,
     *,
-    batch_size: int,
-    learning_rate: float,
-    weight_decay: float,
-    clip_norm: float,
-    max_epochs: int,
-    patience: int,
     on_epoch_end: Callable | None = None,
     round_index: int = 0,
     mesh=None,
     steps_per_call: int = 32,
-    lr_schedule: str = "constant",
-    average_epochs: float = 0.0,
 ):
     """Train ``flow`` on ``theta``/``x`` (host arrays); return the best-validation flow and an info dict.
+
+    ``training`` gives the batch size, epochs, patience, learning-rate schedule and weight
+    averaging; ``optimizer`` defaults to ``make_optimizer(training)`` (a schedule other than
+    ``"constant"`` needs its learning rate injected, ``optax.inject_hyperparams``).
 
     Batches have a fixed size (ragged last batch dropped), a multiple of the device count; the
     batch axis is sharded over ``mesh`` and the model is replicated. Steps run in compiled
@@ -273,13 +285,14 @@ def fit(
     moving average of the weights with a time constant of that many epochs, started from
     ``flow`` (it damps the SGD noise a short, early-stopped round leaves in the weights).
     """
+    optimizer = make_optimizer(training) if optimizer is None else optimizer
+    learning_rate, lr_schedule = training.learning_rate, training.lr_schedule
+    max_epochs, patience = training.max_epochs, training.patience
     mesh = data_mesh() if mesh is None else mesh
     tr, va = np.flatnonzero(~is_val), np.flatnonzero(is_val)
-    bsz, vsz = _batch_sizes(tr.size, va.size, batch_size, mesh.devices.size)
+    bsz, vsz = _batch_sizes(tr.size, va.size, training.batch_size, mesh.devices.size)
     scheduled = lr_schedule != "constant"
-    epoch_learning_rate(learning_rate, lr_schedule, 0, max_epochs)  # checks the name
-    optimizer = make_optimizer(float(learning_rate), float(weight_decay), float(clip_norm), scheduled)
-    state, decay = _train_state(flow, optimizer, mesh, average_epochs, tr.size // bsz)
+    state, decay = _train_state(flow, optimizer, mesh, training.average_epochs, tr.size // bsz)
     flow = state[0]
     key, val_key = jax.random.split(key)
     data = (theta, x, prior_mask)

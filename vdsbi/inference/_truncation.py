@@ -21,7 +21,6 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, PRNGKeyArray
 
-from ._config import NPEConfig
 from ._flow import ConditionalFlow
 from ._posterior import _log_prob, _sample
 from ._prior import BoxPrior
@@ -122,32 +121,20 @@ def _reject(key, propose, keep, n: int) -> tuple[np.ndarray, int]:
     return np.concatenate(out), drawn
 
 
-def _region_threshold(lp: np.ndarray, epsilon: float, widen: float) -> float:
-    """The log-density level of the region from the flow's log densities ``lp`` at its own draws.
-
-    The ``1 - ε`` HPD level is the ``ε`` quantile of ``lp``. ``widen`` > 1 lowers it: its depth
-    below the highest ``lp`` is multiplied by ``widen²``, which for a Gaussian posterior is the
-    ``1 - ε`` HPD region with every standard deviation times ``widen``, and always a superset.
-    A region that cuts the true posterior's tails biases the next round's fit narrower, whose
-    region cuts deeper; widening counters that.
-    """
-    level = float(np.quantile(lp, epsilon))
-    top = float(np.max(lp))
-    return top - widen**2 * (top - level)
-
-
 def truncated_prior(
     key: PRNGKeyArray,
     flow: ConditionalFlow,
     prior: BoxPrior,
     x_o: Array,
     n: int,
-    config: NPEConfig,
+    epsilon: float = 1e-4,
+    num_samples: int = 10_000,
     *,
     proposal: str = "auto",
 ) -> tuple[Array, dict[str, Any]]:
-    """``n`` draws of the prior restricted to the ``1 - ε`` HPD region of ``flow`` at ``x_o``
-    (widened by ``config.truncation_widen``, see `_region_threshold`).
+    """``n`` draws of the prior restricted to the ``1 - epsilon`` HPD region of ``flow`` at
+    ``x_o``, whose level is the ``epsilon`` quantile of the flow's log density at
+    ``num_samples`` of its own draws.
 
     ``proposal``: ``"auto"`` (the ellipsoid when its part inside the box is smaller than the
     box; a posterior with far-flung draws can make it larger), ``"prior"`` or
@@ -157,14 +144,15 @@ def truncated_prior(
     only a wider one, so the fit stays unbiased; posterior draws would not.
     """
     k_ref, k_draw, k_fill = jax.random.split(key, 3)
-    ref = np.asarray(_sample(flow, k_ref, x_o, config.truncation_samples))
+    ref = np.asarray(_sample(flow, k_ref, x_o, num_samples))
     lp = np.asarray(_log_prob(flow, jnp.asarray(ref), x_o))
-    threshold = _region_threshold(lp, config.truncation_epsilon, config.truncation_widen)
+    top = float(np.max(lp))
+    threshold = top - (top - float(np.quantile(lp, epsilon)))  # the level, as a depth below the top
 
     def keep(theta):  # the flow's density is -inf outside the box
         return np.asarray(_log_prob(flow, jnp.asarray(theta, jnp.float32), x_o)) >= threshold
 
-    ell = _Ellipsoid.around(ref[lp >= threshold], _SCALE * config.truncation_widen)
+    ell = _Ellipsoid.around(ref[lp >= threshold], _SCALE)
     box_log_volume = float(jnp.sum(jnp.log(prior.high - prior.low)))
     for growth in range(_GROWTHS + 1):
         k_pilot, k_draw = jax.random.split(k_draw)

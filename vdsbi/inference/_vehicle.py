@@ -13,7 +13,7 @@ from ..simulator import PARAM_NAMES, StochasticSimulator
 from ._apt import apt
 from ._apt_state import APTState
 from ._cnn import CNNEmbedding
-from ._config import NPEConfig
+from ._config import NPEConfig, SequentialSettings, SplineFlowSettings, TrainingSettings
 from ._embeddings import MLPEmbedding
 from ._posterior import Posterior
 from ._prior import BoxPrior
@@ -24,20 +24,22 @@ from ._summaries import summary_statistics
 # the amortised posterior overconfident. The epoch counts are the longest whose amortised
 # posterior passes SBC (`benchmarks/summaries.py`); longer training is overconfident.
 #: Training for the statistics' MLP.
-STATS_CONFIG = NPEConfig(batch_size=256, learning_rate=1e-3, max_epochs=30, patience=6, lr_schedule="cosine")
+STATS_CONFIG = NPEConfig(
+    training=TrainingSettings(
+        batch_size=256, learning_rate=1e-3, max_epochs=30, patience=6, lr_schedule="cosine"
+    )
+)
 #: Training for the CNN. `later_max_epochs` caps each later round at 30 passes over its new
 #: simulations, which bounds the time of a whole sequential run. `tail_bound` 4 (default 3):
 #: beyond the spline interval the flow is the identity, so base draws past ±3 escape the
 #: splines' contraction to TSNPE's narrow posterior and land near the box edges; a wider
 #: interval (5) leaves round 1 overconfident under SBC.
 CNN_CONFIG = NPEConfig(
-    batch_size=256,
-    learning_rate=1e-3,
-    max_epochs=20,
-    patience=6,
-    lr_schedule="cosine",
-    later_max_epochs=30,
-    tail_bound=4.0,
+    flow=SplineFlowSettings(tail_bound=4.0),
+    training=TrainingSettings(
+        batch_size=256, learning_rate=1e-3, max_epochs=20, patience=6, lr_schedule="cosine"
+    ),
+    sequential=SequentialSettings(later_max_epochs=30),
 )
 
 
@@ -57,7 +59,7 @@ class IdentifySettings:
             al. 2022); False: APT's posterior proposals and atomic loss (Greenberg et al. 2019),
             which on the seed's maneuver can leave much of the posterior in a spurious mode.
         config: flow and training hyperparameters (default: `CNN_CONFIG` or `STATS_CONFIG`
-            for the embedding); its ``x_standardize`` is overridden by `npe_config` for the CNN
+            for the embedding); its ``flow.x_standardize`` is overridden by `npe_config` for the CNN
             (see there). Later rounds wait ``ceil(patience · new/all)`` epochs
             (``patience_unit="new_data"``), as for the other tasks.
     """
@@ -76,7 +78,8 @@ class IdentifySettings:
         simulated trajectory: all simulations share the recording's inputs, and per-channel
         scaling alone buries small θ-driven differences under the manoeuvre's own variation."""
         if self.embedding == "cnn":
-            return dataclasses.replace(self.config, x_standardize="trajectory")
+            flow = dataclasses.replace(self.config.flow, x_standardize="trajectory")
+            return dataclasses.replace(self.config, flow=flow)
         return self.config
 
     def __post_init__(self):

@@ -7,7 +7,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..inference import BoxPrior
+from vdsbi.inference import BoxPrior
+
 from ._base import AbstractTask
 
 

@@ -5,7 +5,8 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.stats
 
-from ..inference import BoxPrior
+from vdsbi.inference import BoxPrior
+
 from ._base import AbstractTask
 
 _VAR = 0.1

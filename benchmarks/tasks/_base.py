@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, PRNGKeyArray
 
-from ..inference import BoxPrior
+from vdsbi.inference import BoxPrior
 
 OBSERVATION_SEED = 20240601
 REFERENCE_SEED = 20240602

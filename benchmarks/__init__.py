@@ -1,0 +1,1 @@
+"""Benchmarks of vdsbi: scripts, their helpers and the sbibm tasks (`benchmarks.tasks`)."""

@@ -1,0 +1,62 @@
+"""The sbibm benchmarks' configs as flat dicts of named fields: what their results files store
+and ``--set FIELD=VALUE`` names."""
+
+import dataclasses
+
+from vdsbi.inference import (
+    FlowMatchingSettings,
+    IdentityMap,
+    LogitMap,
+    NPEConfig,
+    SequentialSettings,
+    SplineFlowSettings,
+    TrainingSettings,
+)
+
+#: The results files store a config flat, under these names: the spline flow's fields as they
+#: are, the flow-matching estimator's with an ``fmpe_`` prefix, ``estimator`` ("nsf" or
+#: "fmpe"), ``theta_map`` ("logit" or "affine"), ``x_standardize``, then the training and
+#: sequential settings' fields.
+_FMPE_FIELDS = {"fmpe_hidden": "hidden", "fmpe_num_blocks": "num_blocks", "fmpe_ode_steps": "ode_steps"}
+_COMMON = ("theta_map", "x_standardize")
+_SPLINE_FIELDS = tuple(f.name for f in dataclasses.fields(SplineFlowSettings) if f.name not in _COMMON)
+_THETA_MAPS = {m.name: m for m in (LogitMap(), IdentityMap())}
+#: Fields of cells run before they were removed from the library, at the value that made them no-ops.
+RETIRED = {
+    "retrain_from_scratch": False,
+    "fmpe_time_power": 1.0,
+    "min_box_mass_ratio": 0.0,
+    "min_proposal_box_mass": 0.0,
+    "ensemble": 1,
+    "combined_loss": False,
+    "truncation_widen": 1.0,
+}
+
+
+def flat_config(config: NPEConfig) -> dict:
+    """``config`` as one flat dict (see `_FMPE_FIELDS`), as the results files store it."""
+    flow = config.flow
+    fmpe = isinstance(flow, FlowMatchingSettings)
+    spline = SplineFlowSettings() if fmpe else flow
+    other = flow if fmpe else FlowMatchingSettings()
+    out = {k: getattr(spline, k) for k in _SPLINE_FIELDS}
+    out.update({k: getattr(other, v) for k, v in _FMPE_FIELDS.items()})
+    out.update(estimator="fmpe" if fmpe else "nsf", theta_map=flow.theta_map.name)
+    out["x_standardize"] = flow.x_standardize
+    return {**out, **dataclasses.asdict(config.training), **dataclasses.asdict(config.sequential)}
+
+
+def make_config(**fields) -> NPEConfig:
+    """The `NPEConfig` of the flat ``fields`` (`flat_config`'s names; the others at their defaults)."""
+    f = {**flat_config(NPEConfig()), **fields}
+    unknown = set(f) - set(flat_config(NPEConfig()))
+    if unknown:
+        raise TypeError(f"not config fields: {sorted(unknown)}")
+    common = dict(theta_map=_THETA_MAPS[f["theta_map"]], x_standardize=f["x_standardize"])
+    if f["estimator"] == "fmpe":
+        flow = FlowMatchingSettings(**{v: f[k] for k, v in _FMPE_FIELDS.items()}, **common)
+    else:
+        flow = SplineFlowSettings(**{k: f[k] for k in _SPLINE_FIELDS}, **common)
+    groups = [(TrainingSettings, "training"), (SequentialSettings, "sequential")]
+    kw = {g: cls(**{x.name: f[x.name] for x in dataclasses.fields(cls)}) for cls, g in groups}
+    return NPEConfig(flow=flow, **kw)
