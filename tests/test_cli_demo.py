@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from vdsbi.api import demo_recording
+from vdsbi.api._demo import demo_recording
 from vdsbi.io import read_recording, read_vehicle
 
 
@@ -33,8 +33,8 @@ def test_demo_runs_the_whole_loop_into_one_folder(tmp_path):
         rounds=1,
         sims=100,
         epochs=3,
-        diagnose={"candidates": ("sensor_bias",), "top_pairs": 0, "final_dt": 0.005, "num_draws": 100},
-        identify={"refine": False, "ppc_draws": 30},
+        diagnose={"candidates": ("sensor_bias",), "max_effects": 1, "final_dt": 0.005, "num_draws": 100},
+        identify={"ppc_draws": 30},
     )
     out = tmp_path / "demo"
     res = api.demo(out, budget=budget)

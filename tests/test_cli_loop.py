@@ -27,7 +27,7 @@ from vdsbi.simulator import (
 NOISE = {"ax": 0.05, "ay": 0.05, "yaw_rate": 0.005, "omega_front": 0.1, "omega_rear": 0.1, "vx": 0.05}
 BIAS = {"ax": 0.3, "ay": -0.25, "yaw_rate": 0.0}
 #: Enough to learn the ax bias.
-WITH_EFFECT = "--rounds 2 --sims 200 --epochs 30 --samples 500 --no-refine --quiet".split()
+WITH_EFFECT = "--rounds 2 --sims 200 --epochs 30 --samples 500 --quiet".split()
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +86,7 @@ def diagnosis(biased, tmp_path_factory) -> tuple[Path, str]:
     out = tmp_path_factory.mktemp("loop") / "diag"
     rec, veh = biased
     args = ["diagnose", str(rec), "--vehicle", str(veh), "--out", str(out), "--final-dt", "0.005"]
-    args += ["--effects", "sensor_bias,road_grade", "--top-pairs", "0"]
+    args += ["--effects", "sensor_bias,road_grade", "--max-effects", "1"]
     printed = io.StringIO()
     with contextlib.redirect_stdout(printed):
         assert main(args) == 0
@@ -140,13 +140,13 @@ def test_export_autoware_keys_as_the_mpc_lateral_controller_reads_them(effect_ru
     post = json.loads((effect_run / "posterior.json").read_text())
     p = post["parameters"]
     # Per-axle cornering stiffness in both: written unconverted.
-    assert v["cf"] == pytest.approx(p["C_alpha_f"]["mean"], abs=1e-3)
-    assert v["cr"] == pytest.approx(p["C_alpha_r"]["mean"], abs=1e-3)
+    assert v["cf"] == pytest.approx(p["C_alpha_f"]["estimate"], abs=1e-3)
+    assert v["cr"] == pytest.approx(p["C_alpha_r"]["estimate"], abs=1e-3)
     veh = default_vehicle()
     front = v["mass_fl"] + v["mass_fr"]
     assert front + v["mass_rl"] + v["mass_rr"] == pytest.approx(veh.mass, abs=0.01)
     # Autoware's DynamicsBicycleModel: l_f = L (1 - m_front / m) gives back our l_f.
-    assert veh.wheelbase * (1 - front / veh.mass) == pytest.approx(p["l_f"]["mean"], abs=1e-4)
+    assert veh.wheelbase * (1 - front / veh.mass) == pytest.approx(p["l_f"]["estimate"], abs=1e-4)
     assert post["recording"] in text and "90 %" in text and "sensor_bias" in text
 
 
@@ -161,7 +161,7 @@ def test_export_json_and_csv_carry_every_parameter_with_its_interval(effect_run,
     for n, p in post["parameters"].items():
         assert rows.loc[n, "q05"] == pytest.approx(p["q05"], rel=1e-5)
         want = table[n]["value"]
-        assert (want is None) if p.get("identified") is False else want == pytest.approx(p["mean"])
+        assert (want is None) if p.get("identified") is False else want == pytest.approx(p["estimate"])
 
 
 def test_export_bad_input_exits_2(tmp_path, capsys):

@@ -23,4 +23,5 @@ from ._diagnose import diagnose as diagnose
 from ._export import export as export
 from ._identify import IdentifyResult as IdentifyResult, identify as identify, sample as sample
 from ._observability import ObservabilityResult as ObservabilityResult, observability as observability
+from ._predict import PredictResult as PredictResult, predict as predict
 from ._simulate import SimulateResult as SimulateResult, simulate as simulate

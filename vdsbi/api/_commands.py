@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 import shlex
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 
@@ -23,13 +23,48 @@ def diagnose_command(recording, vehicle, out, longitudinal: str = "auto") -> str
     return cmd + ("" if longitudinal == "auto" else f" --longitudinal {longitudinal}")
 
 
-def identify_command(recording, vehicle, out, effects: Sequence[str], longitudinal: str = "auto") -> str:
-    """`vdsbi identify REC --vehicle V --out identify-NAMES --effects NAMES` with the effects a
-    diagnosis named (the folder beside the diagnosis' `out`)."""
+def identify_command(
+    recording,
+    vehicle,
+    out,
+    effects: Sequence[str],
+    longitudinal: str = "auto",
+    priors: Mapping[str, tuple[float, float]] | None = None,
+) -> str:
+    """`vdsbi identify REC --vehicle V --out identify-NAMES --effects NAMES [--prior NAME=LO:HI …]`
+    with the effects a diagnosis named and the ranges it measured for their parameters (the
+    folder beside the diagnosis' `out`)."""
     name = "identify-" + ("-".join(effects) or "base")
     target = name if out is None else str(Path(out).parent / name)
     cmd = (
         f"vdsbi identify {shown(recording, 'REC')} --vehicle {shown(vehicle, 'VEHICLE')} "
         f"--out {shlex.quote(target)} --effects {','.join(effects) if effects else 'none'}"
     )
+    cmd += "".join(f" --prior {n}={lo:.4g}:{hi:.4g}" for n, (lo, hi) in (priors or {}).items())
     return cmd + ("" if longitudinal == "auto" else f" --longitudinal {longitudinal}")
+
+
+#: A measured effect parameter's prior spans this many of its standard errors either side ...
+PRIOR_STDS = 4.0
+#: ... and at least this fraction of its value (a fit's standard error ignores model error).
+PRIOR_FRACTION = 0.5
+
+
+def measured_priors(
+    effects: Sequence[str], values: Mapping[str, Mapping[str, float]], stds: Mapping[str, Mapping[str, float]]
+) -> dict[str, tuple[float, float]]:
+    """Prior ranges {effect.param: (lo, hi)} around what a diagnosis measured: the value ±
+    max(`PRIOR_STDS`·std, `PRIOR_FRACTION`·|value|), inside the effect's fit bounds and its null."""
+    from ..simulator import get_effect
+
+    out = {}
+    for e in effects:
+        eff = get_effect(e)
+        for p, (b_lo, b_hi), null in zip(eff.param_names, eff.bounds, eff.null):
+            if p not in values.get(e, {}):
+                continue
+            v, sd = float(values[e][p]), float(stds.get(e, {}).get(p, 0.0))
+            half = max(PRIOR_STDS * sd, PRIOR_FRACTION * abs(v), 1e-6 * (b_hi - b_lo))
+            lo, hi = max(v - half, min(b_lo, null)), min(v + half, max(b_hi, null))
+            out[f"{e}.{p}"] = (lo, hi)
+    return out

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ..io import output_dir
+from ._commands import measured_priors
 from ._diagnose import diagnose
 from ._identify import IdentifyResult, identify
 from ._pages import demo_page
@@ -159,8 +160,8 @@ def demo(
         truth = demo_recording(d, duration=b.duration, seed=seed)
         rec, veh = _drive(d, name)
         say(f"2/5 identify with the base model: {b.base_rounds} round(s) x {b.sims} simulations")
-        # Flagged anyway: no point refining it or spending more rounds on it.
-        base = run(rec, veh, d, name, "identify", (), refine=False, rounds=b.base_rounds)
+        # Flagged anyway: no point spending more rounds on it.
+        base = run(rec, veh, d, name, "identify", (), rounds=b.base_rounds)
         runs, diagnosis, report = [("base model", "identify", base)], "skipped (--no-diagnose)", None
         if run_diagnosis:
             say("3/5 diagnose: looking for missing physics")
@@ -181,7 +182,7 @@ def demo(
                     (
                         f"with {', '.join(report['chosen'])}",
                         folder,
-                        run(rec, veh, d, name, folder, report["chosen"]),
+                        run(rec, veh, d, name, folder, report["chosen"], priors=_measured(report)),
                     )
                 )
         say("5/5 the before/after page")
@@ -214,6 +215,12 @@ def _identify(rec, veh, d: Path, name: Path, folder: str, effects, *, budget, se
     (d / folder / "table.txt").write_text(res.table() + "\n")
     say(res.table())
     return res
+
+
+def _measured(report) -> dict:
+    """The prior ranges the diagnosis measured (those its printed command passes as --prior)."""
+    chosen = report["chosen"]
+    return measured_priors(chosen, report.get("effect_params", {}), report.get("effect_params_std", {}))
 
 
 def _drive(d: Path, name: Path):

@@ -1,4 +1,4 @@
-"""`diagnose`: find, name and fix model mismatch (`vdsbi.discovery.diagnose`), and say which
+"""`diagnose`: find, name and fix model mismatch (`vdsbi.discovery.diagnose_mismatch`), and say which
 `identify` command models what it named."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from ._commands import identify_command
+from ._commands import identify_command, measured_priors
 from ._pages import diagnose_page
 
 
@@ -20,24 +20,28 @@ def diagnose(
     names: tuple[Any, Any, Any] | None = None,
     **options,
 ):
-    """`vdsbi.discovery.diagnose` (imported on first use: it pulls in the discovery layer), with
-    `report["identify_command"]`: the `vdsbi identify … --effects NAMES` that models the effects
-    it chose, written into report.json and report.md; report.html shows the tables and figures.
+    """`vdsbi.discovery.diagnose_mismatch` (imported on first use: it pulls in the discovery layer), with
+    `report["identify_command"]`: the `vdsbi identify … --effects NAMES --prior …` that models the
+    effects it chose, with prior ranges around the values it measured (`measured_priors`),
+    written into report.json and report.md; report.html shows the tables and figures.
 
     Args:
-        recording, vehicle, out_dir, **options: as `vdsbi.discovery.diagnose`.
+        recording, vehicle, out_dir, **options: as `vdsbi.discovery.diagnose_mismatch`.
         names: (recording, vehicle, out_dir) as the user knows them, for the command (default:
             the arguments as given).
     """
-    from ..discovery import diagnose as _diagnose, write_report
+    from ..discovery import diagnose_mismatch, write_report
 
-    found = _diagnose(recording, vehicle, None, **options)
+    found = diagnose_mismatch(recording, vehicle, None, **options)
     rec, veh, out = (
         n if isinstance(n, (str, os.PathLike)) else None for n in (names or (recording, vehicle, out_dir))
     )
     if rec is None:
         rec = found.report["source"]
-    command = identify_command(rec, veh, out, found.report["chosen"], options.get("longitudinal", "auto"))
+    chosen = found.report["chosen"]
+    rep = found.report
+    priors = measured_priors(chosen, rep.get("effect_params", {}), rep.get("effect_params_std", {}))
+    command = identify_command(rec, veh, out, chosen, options.get("longitudinal", "auto"), priors)
     found = dataclasses.replace(found, report={**found.report, "identify_command": command})
     if out_dir is not None:
         plots = options.get("plots", getattr(options.get("settings"), "plots", True))

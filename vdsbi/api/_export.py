@@ -57,7 +57,7 @@ def corner_masses(mass: float, wheelbase: float, l_f: float) -> dict[str, float]
 def export(
     run_dir: str | os.PathLike, fmt: str = "autoware", vehicle: Mapping[str, Any] | None = None
 ) -> str:
-    """The text of `run_dir`'s result in format `fmt` (posterior means; intervals in comments or
+    """The text of `run_dir`'s result in format `fmt` (estimates; intervals in comments or
     columns).
 
     Args:
@@ -82,16 +82,13 @@ def export(
 
 
 def _table(post: Mapping[str, Any]) -> dict[str, Any]:
-    """Per parameter: value (posterior mean), std, 5/95 % quantiles, the refined (least-squares)
-    point where identify made one, unit, identified."""
-    refined = post.get("refined", {}).get("values", {})
+    """Per parameter: value (identify's estimate), std, 5/95 % quantiles, unit, identified."""
     rows = {
         n: {
-            "value": None if p.get("identified") is False else p["mean"],
+            "value": None if p.get("identified") is False else _value(p),
             "std": p["std"],
             "q05": p["q05"],
             "q95": p["q95"],
-            "refined": None if p.get("identified") is False else refined.get(n),
             "unit": p["unit"],
             "identified": p.get("identified", True),
         }
@@ -103,7 +100,7 @@ def _table(post: Mapping[str, Any]) -> dict[str, Any]:
 def _csv(table: Mapping[str, Any]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    keys = ("value", "std", "q05", "q95", "refined")
+    keys = ("value", "std", "q05", "q95")
     w.writerow(["parameter", *keys, "unit", "identified"])
     for n, r in table["parameters"].items():
         w.writerow([n, *("" if r[k] is None else f"{r[k]:.6g}" for k in keys), r["unit"], r["identified"]])
@@ -123,7 +120,7 @@ def autoware(post: Mapping[str, Any], vehicle: Mapping[str, Any] | None, run_dir
         raise InputError(run_dir / "posterior.json", "vehicle", "no mass/wheelbase recorded; pass --vehicle")
     m, L = float(vehicle["mass"]), float(vehicle["wheelbase"])
     lf = params["l_f"]
-    masses = corner_masses(m, L, lf["mean"])
+    masses = corner_masses(m, L, _value(lf))
     lo, hi = corner_masses(m, L, lf["q95"]), corner_masses(m, L, lf["q05"])  # front mass falls as l_f grows
     caf, car = params["C_alpha_f"], params["C_alpha_r"]
     effects = ", ".join(post.get("effects", [])) or "none"
@@ -131,7 +128,7 @@ def autoware(post: Mapping[str, Any], vehicle: Mapping[str, Any] | None, run_dir
     head = [
         f"# Identified by vdsbi {post.get('vdsbi_version', '?')} from {post['recording']}",
         f"# (identify folder {run_dir}; effects in the model: {effects}).",
-        "# Posterior means; 90 % intervals [q05, q95]:",
+        "# Estimates (the best fit of the drive); 90 % posterior intervals [q05, q95]:",
         f"#   vehicle.cf = C_alpha_f {_interval(caf, '.1f')} N/rad (front axle, both tyres: no conversion)",
         f"#   vehicle.cr = C_alpha_r {_interval(car, '.1f')} N/rad (rear axle)",
         f"#   l_f = {_interval(lf, '.4f')} m (CoG to front axle; wheelbase {L:g} m, mass {m:g} kg)",
@@ -139,13 +136,6 @@ def autoware(post: Mapping[str, Any], vehicle: Mapping[str, Any] | None, run_dir
         f"#   mass_rl = mass_rr = m*l_f/(2L) = {rear} kg [{hi['mass_rl']:.1f}, {lo['mass_rl']:.1f}]",
         "#   (Autoware derives l_f = L*(1 - (mass_fl + mass_fr)/m) from these: the value above.)",
     ]
-    refined = post.get("refined", {}).get("values", {})
-    if refined:
-        head.append(
-            f"# identify's refined least-squares point (not written below): C_alpha_f "
-            f"{refined['C_alpha_f']:.1f}, C_alpha_r {refined['C_alpha_r']:.1f} N/rad, "
-            f"l_f {refined['l_f']:.4f} m"
-        )
     head += [f"# WARNING: {w['message']}" for w in post.get("warnings", [])]
     body = [
         "/**:",
@@ -153,11 +143,16 @@ def autoware(post: Mapping[str, Any], vehicle: Mapping[str, Any] | None, run_dir
         '    vehicle_model_type: "dynamics"',
         "    vehicle:",
         *(f"      {k}: {v:.3f}" for k, v in masses.items()),
-        f"      cf: {caf['mean']:.3f}",
-        f"      cr: {car['mean']:.3f}",
+        f"      cf: {_value(caf):.3f}",
+        f"      cr: {_value(car):.3f}",
     ]
     return "\n".join(head + body) + "\n"
 
 
+def _value(p: Mapping[str, Any]) -> float:
+    """The exported value of a parameter: identify's estimate."""
+    return float(p["estimate"])
+
+
 def _interval(p: Mapping[str, Any], f: str) -> str:
-    return f"{p['mean']:{f}} [{p['q05']:{f}}, {p['q95']:{f}}]"
+    return f"{_value(p):{f}} [{p['q05']:{f}}, {p['q95']:{f}}]"

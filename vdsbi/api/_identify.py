@@ -1,5 +1,5 @@
-"""`identify`: a posterior over θ from one recording, checkpointed per round; `sample` from the
-estimator it saved."""
+"""`identify`: the vehicle's parameters with their posterior from one drive (or several of one car),
+checkpointed per round; `sample` from the neural estimator it saved."""
 
 from __future__ import annotations
 
@@ -14,20 +14,23 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
+from ..diagnostics import fit_likelihood
 from ..io import InputError, SimulationError
 from ..problem import (
+    Box,
     Problem,
     ProblemSettings,
+    band_coverage,
+    concat_problems,
     grip_used,
     longitudinal_mode,
     make_problem,
     parameter_names,
     parameter_units,
+    predictive_band,
     prior_box,
-    simulate_draws,
     split_parameters,
     validate,
-    windowed_model,
 )
 from ..simulator import release_compiled_programs
 from ._commands import diagnose_command
@@ -49,12 +52,13 @@ class IdentifyResult:
     """What `identify` found.
 
     Attributes:
-        posterior: the trained `vdsbi.inference.Posterior` at the recording.
-        samples: (num_samples, 6) posterior draws, PARAM_NAMES order.
-        summary: the content of posterior.json (parameters, channels, segment, noise, settings).
+        posterior: the trained neural posterior (`vdsbi.inference.Posterior`), for `vdsbi sample`.
+        samples: (num_samples, P) draws of the reported (likelihood) posterior, names order.
+        summary: the content of posterior.json (parameters with their estimate, noise model,
+            combinations, validation, predictive check, warnings).
         out_dir: where the files were written, or None.
-        problem: the drive's `vdsbi.problem.Problem` (windows, channels, held-out masks).
-        ppc: the posterior-predictive 5/50/95 % bands on `problem`'s windows.
+        problem: the whole drive's `vdsbi.problem.Problem` (every usable window).
+        ppc: the posterior-predictive 5/50/95 % band on the validation problem's windows.
     """
 
     posterior: Any
@@ -65,24 +69,27 @@ class IdentifyResult:
     ppc: dict[str, Any] | None = None
 
     def table(self) -> str:
-        """Per-parameter mean, std and 5/50/95 % quantiles as aligned text; a parameter the drive
-        cannot inform is printed as "not identified" with its prior range, never as an estimate;
-        then one line per warning (posterior not to be trusted)."""
+        """Per parameter: the estimate (the best fit, what `export` writes), the posterior's std and
+        5/50/95 % quantiles; a parameter the drive cannot inform is printed as "not identified"
+        with its prior range; then the combinations the drive determines and the warnings."""
         width = max(10, *(len(n) for n in self.summary["parameters"]))
-        refined = self.summary.get("refined", {}).get("values", {})
-        rows = [
-            f"{'param':<{width}} {'mean':>11} {'std':>10} {'q05':>11} {'q50':>11} {'q95':>11}"
-            + (f" {'refined':>11}" if refined else "")
-        ]
+        rows = [f"{'param':<{width}} {'estimate':>11} {'std':>10} {'q05':>11} {'q50':>11} {'q95':>11}"]
         for name, p in self.summary["parameters"].items():
             if p.get("identified") is False:
                 lo, hi = p["prior"]
                 rows.append(f"{name:<{width}} not identified by this drive (prior {lo:.4g} .. {hi:.4g})")
                 continue
             rows.append(
-                f"{name:<{width}} {p['mean']:>11.4g} {p['std']:>10.3g} "
+                f"{name:<{width}} {p['estimate']:>11.4g} {p['std']:>10.3g} "
                 f"{p['q05']:>11.4g} {p['q50']:>11.4g} {p['q95']:>11.4g}"
-                + (f" {refined[name]:>11.4g}" if name in refined else "")
+            )
+        for key, c in self.summary.get("combinations", {}).items():
+            if key == "determined_directions":
+                continue
+            at = f" at {c['at']} m/s" if c.get("at") else ""
+            rows.append(
+                f"{key.replace('_', ' ')}{at}: {c['median']:.4g} {c['unit']} "
+                f"[95 %: {c['q025']:.4g} .. {c['q975']:.4g}]"
             )
         rows += [f"WARNING: {w['message']}" for w in self.summary.get("warnings", ())]
         return "\n".join(rows)
@@ -108,8 +115,9 @@ def identify(
     longitudinal: str = "auto",
     bandwidth: float | str | None = "auto",
     effects: Sequence[str] | None = None,
+    priors: Mapping[str, tuple[float, float]] | None = None,
+    holdout: float = 0.3,
     compare: Mapping[str, Any] | None = None,
-    refine: bool = True,
     ppc_draws: int = 100,
     progress: bool = False,
     rate: float = 200.0,
@@ -117,44 +125,44 @@ def identify(
     log: Callable[[str], None] | None = None,
     names: tuple[Any, Any, Any] | None = None,
 ) -> IdentifyResult:
-    """Posterior over θ (and enabled effects' parameters) from a whole drive.
+    """The vehicle's parameters (and enabled effects') from one drive or several of one car.
 
-    Stages: read the drive; make its problem (windows over every usable stretch, the last 30 %
-    held out); choose the effects; train APT on the training windows; summarise; flag the
-    parameters the drive cannot inform (Fisher information); refine the point estimate by least
-    squares; validate both on the held-out driving;
-    posterior predictive check; write the files.
+    Stages: read the drives; make the validation problem (the last `holdout` of the usable
+    driving held out) and the full one (all of it); choose the effects and the prior box; train
+    the neural posterior (APT) on the validation problem's training part; fit the likelihood
+    posterior there from its draws (`vdsbi.diagnostics.fit_likelihood`: best fit through the
+    simulator, model error in the noise model, Laplace) and score it on the held-out part with
+    its predictive band; refit on all the driving from that fit: the exported estimate and the
+    reported posterior; check the neural posterior against the likelihood one; flag what the
+    drive cannot inform and report what it does determine; write the files.
 
     Args:
-        recording: path (.csv, .parquet, bag) or a `vdsbi.io.Recording`.
+        recording: path (.csv, .parquet, bag), a `vdsbi.io.Recording`, or a sequence of them
+            (recordings of one car, identified jointly, each window from its own state).
         vehicle: path (.json/.yaml) or a `vdsbi.simulator.Vehicle`.
         rounds, sims: APT rounds and simulations per round.
         embedding: "stats" or "cnn".
         seed: the only source of randomness; same seed, same machine → identical samples.
-        out_dir: write posterior.json, samples.csv, pairplot.png, ppc.png, estimator.npz and the
+        out_dir: write posterior.json, samples.csv, plots, report.html, estimator.npz and the
             per-round checkpoint here (None: write nothing).
         resume: continue from `out_dir`'s checkpoint (must have been made with the same settings).
-        epochs: maximum training epochs per round (default: IdentifySettings' 40).
+        epochs: maximum training epochs per round.
         num_samples: posterior samples kept.
         segment: (t0, t1) s to restrict the drive to (default: all of it).
         max_duration: longest window, s (default 20 in torque mode, 10 in speed mode).
-        longitudinal: "torque", "speed" (follow the measured speed; for logs without torques
-            or with commanded ones) or "auto" (torque when the recording has torques).
-        bandwidth: low-pass cutoff, Hz, shared by measured and simulated channels ("auto": none
-            with torques, 5 Hz following the speed; None: none).
-        effects: effects whose parameters join θ; None adds `tyre_friction` when the drive
-            uses more than half the grip (Dugoff leaves its linear range there) and
-            `yaw_inertia` in speed mode with a measured yaw rate.
-        compare: reference values {param: value} (e.g. a lab's) scored on the held-out part
-            beside the posterior mean.
-        refine: refine the posterior mean by least squares on the whole training drive
-            (`vdsbi.diagnostics.refine`): the `refined` point estimate, validated beside it.
-        ppc_draws: posterior draws simulated for the predictive check.
+        longitudinal: "torque", "speed" (follow the measured speed) or "auto".
+        bandwidth: low-pass cutoff, Hz, shared by measured and simulated channels.
+        effects: effects whose parameters join θ; None: `default_effects`.
+        priors: {name: (low, high)} replacing the prior box of any parameter (e.g. the ranges
+            `vdsbi diagnose` measured for an effect's parameters).
+        holdout: fraction of the usable driving held out to validate on (0: none; the estimate
+            is always refit on all of it).
+        compare: reference values {param: value} (e.g. a lab's) scored on the held-out part.
+        ppc_draws: posterior draws simulated for the predictive band.
         progress: tqdm bars.
         on_round_end: extra hook called with the APT state after each round's checkpoint.
         log: where one-line messages go (default: nowhere).
-        names: (recording, vehicle, out_dir) as the user knows them, for the files and the
-            commands the result names (default: the arguments as given).
+        names: (recording, vehicle, out_dir) as the user knows them, for the commands printed.
 
     Raises:
         InputError: bad recording, vehicle, settings, a non-empty `out_dir` without `resume`, or
@@ -164,45 +172,81 @@ def identify(
 
     say = log or (lambda s: None)
     release_compiled_programs()  # a process that identifies drive after drive stays under the limit
-    rec, veh = _load(recording, vehicle, rate)
+    recs, veh = _load(recording, vehicle, rate)
     settings = _settings(rounds, sims, embedding, epochs, num_samples)
-    prob = _problem(rec, veh, longitudinal, segment, max_duration, bandwidth)
+    prob = _problem(recs, veh, longitudinal, segment, max_duration, bandwidth, holdout)
+    full = prob if holdout == 0 else _problem(recs, veh, longitudinal, segment, max_duration, bandwidth, 0.0)
     effects = _effects(prob, effects, say)
-    box = prior_box(veh, effects)
-    run_info = _run_info(rec, prob, settings, seed, effects)
-    _describe(prob, say)
-    k_id, k_ppc = jax.random.split(jax.random.key(int(seed)))
+    box = _box(veh, effects, priors)
+    run_info = _run_info(recs, prob, settings, seed, effects, box)
+    _describe(prob, full, say)
+    k_id, k_val, k_post, k_band = jax.random.split(jax.random.key(int(seed)), 4)
     working = contextlib.nullcontext() if out_dir is None else checkpoint_dir(out_dir, resume=resume)
     with working as out:
         state = None if out is None else _start(out, run_info, resume, say)
-        posterior, samples, state = _train(
+        estimator, npe_samples, state = _train(
             k_id, prob, box, effects, settings, state, out, progress, on_round_end, say
         )
-        summary = _summary(prob, samples, state, run_info, box, effects)
+        starts = _starts(npe_samples, box)
+        say("fitting the likelihood posterior on the training part (best fit, model-error noise, Laplace)")
+        checked = fit_likelihood(prob, starts, box, effects=effects)
+        if holdout == 0:
+            fit = checked
+        else:
+            say("refitting on all the usable driving: the estimate and the posterior reported")
+            fit = fit_likelihood(full, np.concatenate([checked.theta[None], starts]), box, effects=effects)
+        samples = np.asarray(fit.sample(k_post, settings.num_samples), float)
+        summary = _summary(full, samples, fit, state, run_info, box, effects, veh)
         summary["vehicle"] = veh.to_dict()  # the constants `vdsbi export` needs beside θ
-        if refine:
-            summary["refined"] = _refined(prob, summary, samples, box, effects, say)
-        summary["validation"] = _validation(prob, summary, effects, compare)
-        ppc = posterior_predictive(k_ppc, prob, samples, effects, ppc_draws)
-        summary["ppc"] = _ppc_summary(prob, ppc)
+        summary["npe_check"] = _npe_check(npe_samples, checked)
+        summary["validation"] = _validation(prob, checked, npe_samples, effects, compare)
+        band = predictive_band(
+            k_band, prob, np.asarray(checked.sample(k_val, ppc_draws)), checked.noise.scale, effects
+        )
+        summary["ppc"] = _ppc_summary(prob, band)
         summary["warnings"] = _warnings(
             samples, summary, box, names or (recording, vehicle, out_dir), longitudinal
         )
-        result = IdentifyResult(posterior, samples, summary, out, prob, ppc)
+        result = IdentifyResult(estimator, samples, summary, out, full, band)
         if out is not None:
-            write_outputs(out, result, prob, ppc)
+            write_outputs(out, result, prob, band)
     return result
 
 
+def default_effects(prob: Problem) -> tuple[str, ...]:
+    """The effects every drive of this kind needs, with the reason for each.
+
+    `tyre_friction` where the drive uses more than half the grip (Dugoff leaves its linear range);
+    following the measured speed with a yaw rate (a real car's log): `yaw_inertia` (a real I_z is
+    not m·l_f·l_r; left at it, the fit bends l_f to match the yaw transient) and `signal_delay`
+    (every real log has latency between the steer signal and the motion it causes: bus, sensor
+    filters, the steering's own lag).
+    """
+    chosen = []
+    used = grip_used(prob)
+    if used is not None and used > 0.5:
+        chosen.append(("tyre_friction", f"the drive uses {used:.0%} of the grip μ·g"))
+    if prob.longitudinal == "speed" and "yaw_rate" in prob.channels:
+        chosen.append(("yaw_inertia", "a real car's yaw inertia is not m·l_f·l_r"))
+        chosen.append(("signal_delay", "a real log's steer leads the motion it causes by its latency"))
+    return tuple(chosen)
+
+
 def _load(recording, vehicle, rate: float):
-    """(Recording, Vehicle) from paths or objects, cross-checked when both are files."""
+    """([Recording, …], Vehicle) from paths or objects, cross-checked when both are files."""
     from ..io import load_drive, read_recording, read_vehicle
 
-    if isinstance(recording, (str, os.PathLike)) and isinstance(vehicle, (str, os.PathLike)):
-        return load_drive(recording, vehicle, rate=rate)
-    rec = read_recording(recording, rate=rate) if isinstance(recording, (str, os.PathLike)) else recording
+    many = recording if isinstance(recording, (list, tuple)) else [recording]
+    if not many:
+        raise InputError("settings", "REC", "no recording given")
     veh = read_vehicle(vehicle) if isinstance(vehicle, (str, os.PathLike)) else vehicle
-    return rec, veh
+    recs = []
+    for r in many:
+        if isinstance(r, (str, os.PathLike)) and isinstance(vehicle, (str, os.PathLike)):
+            recs.append(load_drive(r, vehicle, rate=rate)[0])
+        else:
+            recs.append(read_recording(r, rate=rate) if isinstance(r, (str, os.PathLike)) else r)
+    return recs, veh
 
 
 def _settings(rounds, sims, embedding, epochs, num_samples):
@@ -210,7 +254,9 @@ def _settings(rounds, sims, embedding, epochs, num_samples):
     from ..inference import IdentifySettings
 
     base = IdentifySettings(embedding=embedding)  # the embedding's own training default
-    cfg = base.config if epochs is None else dataclasses.replace(base.config, max_epochs=int(epochs))
+    cfg = base.config
+    if epochs is not None:
+        cfg = dataclasses.replace(cfg, training=dataclasses.replace(cfg.training, max_epochs=int(epochs)))
     return IdentifySettings(
         rounds=int(rounds),
         sims_per_round=int(sims),
@@ -220,21 +266,22 @@ def _settings(rounds, sims, embedding, epochs, num_samples):
     )
 
 
-def _problem(rec, veh, longitudinal: str, segment, max_duration: float | None, bandwidth) -> Problem:
-    """The drive as a `Problem`: 20-s windows with torques, 10-s windows following the speed."""
+def _problem(recs, veh, longitudinal: str, segment, max_duration, bandwidth, holdout: float) -> Problem:
+    """The drives as one `Problem`: 20-s windows with torques, 10-s windows following the speed."""
     if max_duration is not None and max_duration <= 0:
         raise InputError("settings", "--max-duration", "must be > 0")
-    speed = longitudinal_mode(rec, longitudinal) == "speed"
+    if not 0.0 <= holdout < 1.0:
+        raise InputError("settings", "--holdout", f"must lie in [0, 1), got {holdout}")
+    speed = longitudinal_mode(recs[0], longitudinal) == "speed"
     window = max_duration if max_duration is not None else (10.0 if speed else 20.0)
     settings = ProblemSettings(
-        longitudinal=longitudinal, max_window=window, segment=segment, bandwidth=bandwidth
+        longitudinal=longitudinal, max_window=window, segment=segment, bandwidth=bandwidth, held_out=holdout
     )
-    return make_problem(rec, veh, settings)
+    return concat_problems([make_problem(r, veh, settings) for r in recs])
 
 
 def _effects(prob: Problem, effects, say) -> tuple[str, ...]:
-    """The user's effects; by default `tyre_friction` where the drive reaches past Dugoff's
-    linear range, and `yaw_inertia` in speed mode with a measured yaw rate (a real drive)."""
+    """The user's effects, else `default_effects` (each said with its reason)."""
     from ..simulator import EFFECTS
 
     if effects is not None:
@@ -244,46 +291,44 @@ def _effects(prob: Problem, effects, say) -> tuple[str, ...]:
                 "settings", "--effects", f"unknown effect {unknown[0]!r}; known: {', '.join(EFFECTS)}"
             )
         return tuple(effects)
-    chosen = []
-    used = grip_used(prob)
-    if used is not None and used > 0.5:
-        say(f"the drive uses {used:.0%} of the grip μ·g: friction joins θ (tyre_friction.scale)")
-        chosen.append("tyre_friction")
-    if prob.longitudinal == "speed" and "yaw_rate" in prob.channels:
-        # A real car's I_z is not m·l_f·l_r; left at it, the fit bends l_f to match the yaw
-        # transient (on vw_gti_high_speed_2: l_f 0.90 m without, 1.38 m with; lab 1.264 m).
-        say("following the measured yaw rate: the yaw inertia joins θ (yaw_inertia.dynamic_index)")
-        chosen.append("yaw_inertia")
-    return tuple(chosen)
+    chosen = default_effects(prob)
+    for name, why in chosen:
+        say(f"{why}: {name} joins θ")
+    return tuple(name for name, _ in chosen)
 
 
-def _run_info(rec, prob: Problem, settings, seed: int, effects) -> dict[str, Any]:
+def _box(veh, effects, priors) -> Box:
+    try:
+        bounds = prior_box(veh, effects, priors)
+    except ValueError as err:
+        raise InputError("settings", "--prior", str(err)) from None
+    return Box.from_dict(bounds, parameter_names(effects))
+
+
+def _run_info(recs, prob: Problem, settings, seed: int, effects, box: Box) -> dict[str, Any]:
     """What run.json records: a checkpoint resumes only a run with the same."""
     return {
-        "recording": str(rec.source),
+        "recording": " + ".join(str(r.source) for r in recs),
         "seed": int(seed),
         "settings": json.loads(json.dumps(dataclasses.asdict(settings), default=str)),
         "longitudinal": prob.longitudinal,
         "windows": [[w.t0, w.t1, w.role] for w in prob.windows],
         "channels": list(prob.channels),
         "effects": list(effects),
-        "rate_hz": rec.rate,
+        "prior": {n: [float(a), float(b)] for n, a, b in zip(box.names, box.low, box.high)},
+        "rate_hz": recs[0].rate,
     }
 
 
-def _describe(prob: Problem, say: Callable[[str], None]) -> None:
+def _describe(prob: Problem, full: Problem, say: Callable[[str], None]) -> None:
     info = prob.summary()
     say(f"{prob.longitudinal}-driven; {info['how']}; channels {', '.join(prob.channels)}")
-    say(f"fitted {info['train_seconds']:.1f} s, held out {info['held_out_seconds']:.1f} s")
+    say(
+        f"validated: fitted {info['train_seconds']:.1f} s, held out {info['held_out_seconds']:.1f} s; "
+        f"estimate: fitted on all {full.summary()['train_seconds']:.1f} s"
+    )
     for w in prob.warnings:
         say(f"warning: {w}")
-    estimated = any(s.startswith("estimated") for s in prob.noise_source.values())
-    say(
-        "noise std "
-        + ", ".join(f"{c} {v:.3g}" for c, v in zip(prob.channels, prob.sigma))
-        + (" (estimated" if estimated else " (vehicle file")
-        + (", after the shared low-pass)" if prob.decimator is not None else ")")
-    )
 
 
 def _start(out: Path, run_info: dict, resume: bool, say: Callable[[str], None]):
@@ -302,7 +347,7 @@ def _start(out: Path, run_info: dict, resume: bool, say: Callable[[str], None]):
     return state
 
 
-def _train(key, prob: Problem, box, effects, settings, state, out, progress, on_round_end, say):
+def _train(key, prob: Problem, box: Box, effects, settings, state, out, progress, on_round_end, say):
     """`vdsbi.inference.identify_problem` with progress bars, per-round checkpoints and messages."""
     from ..inference import BoxPrior, identify_problem, save_state
 
@@ -321,8 +366,7 @@ def _train(key, prob: Problem, box, effects, settings, state, out, progress, on_
         if on_round_end is not None:
             on_round_end(st)
 
-    names = parameter_names(effects)
-    prior = BoxPrior([box[n][0] for n in names], [box[n][1] for n in names], names=names)
+    prior = BoxPrior(np.asarray(box.low), np.asarray(box.high), names=box.names)
     try:
         return identify_problem(
             key,
@@ -347,98 +391,126 @@ def _train(key, prob: Problem, box, effects, settings, state, out, progress, on_
         bars.close()
 
 
-def _summary(prob: Problem, samples: np.ndarray, state, run_info: dict, box, effects) -> dict[str, Any]:
-    """posterior.json without its validation and predictive check; parameters the drive cannot
-    inform are flagged `identified: false` (their posterior is the prior, not an estimate)."""
-    from ..diagnostics import identifiability
+#: Neural-posterior draws tried, beside its mean and the prior centre, as the fit's start.
+STARTS = 31
 
-    names = parameter_names(effects)
-    params = summarise(samples, box, names, parameter_units(effects))
-    mean = np.array([params[n]["mean"] for n in names])
-    theta, ep = split_parameters(mean, effects)
-    info = identifiability(prob, np.asarray(theta), box, effects=effects, effect_params=ep)
-    for n, v in info.items():
-        params[n]["identified"] = v["identified"]
-        params[n]["crb_std"] = v["posterior_std"]
-        if not v["identified"]:
-            params[n]["not_identified_because"] = v["reason"]
+
+def _starts(npe_samples: np.ndarray, box: Box) -> np.ndarray:
+    """Candidate starts of the likelihood fit: the neural posterior's mean and draws (its global
+    view of where the data put θ) and the prior centre."""
+    centre = np.asarray(box.low + 0.5 * box.width)
+    return np.concatenate([npe_samples.mean(0)[None], centre[None], npe_samples[:STARTS]])
+
+
+def _summary(full: Problem, samples, fit, state, run_info: dict, box: Box, effects, veh) -> dict[str, Any]:
+    """posterior.json's core: the reported posterior (the likelihood one on all the driving), the
+    estimate (its best fit), the noise model, what the drive cannot inform and what it does."""
+    from ..diagnostics import MAX_STD_RATIO, determined_directions, vehicle_combinations
+
+    names = box.names
+    bounds = {n: (float(a), float(b)) for n, a, b in zip(names, box.low, box.high)}
+    params = summarise(samples, bounds, names, parameter_units(effects))
+    for i, n in enumerate(names):
+        prior_std = float(box.width[i]) / np.sqrt(12.0)
+        ratio = params[n]["std"] / prior_std
+        params[n]["estimate"] = float(fit.theta[i])
+        params[n]["identified"] = bool(n in fit.free and ratio <= MAX_STD_RATIO)
+        if n not in fit.free:
+            params[n]["not_identified_because"] = "the channels do not depend on it in this mode"
+        elif ratio > MAX_STD_RATIO:
+            params[n]["not_identified_because"] = f"the drive leaves {ratio:.0%} of its prior std"
+    speed = full.speed if full.speed is not None else np.broadcast_to(full.v0[:, None], full.t.shape)
+    rms_speed = float(np.sqrt(np.mean(np.asarray(speed)[:, :: full.factor][full.train] ** 2)))
+    prior = np.random.default_rng(0).uniform(box.low, box.high, (4000, box.dim))
     return {
         "vdsbi_version": __version__,
         "recording": run_info["recording"],
         "parameters": params,
-        "not_identified": [n for n in names if params[n].get("identified") is False],
+        "estimate": {
+            "values": {n: float(v) for n, v in zip(names, fit.theta)},
+            "method": "best fit of all the usable driving through the simulator (maximum a posteriori "
+            "under the noise model below); the reported posterior is the Laplace approximation there",
+            "converged": fit.converged,
+        },
+        "noise_model": fit.noise.to_dict(),
+        "not_identified": [n for n in names if params[n]["identified"] is False],
+        "combinations": vehicle_combinations(samples, names, veh, rms_speed)
+        | {"determined_directions": determined_directions(samples, prior, names, fit.free)},
         "effects": list(effects),
-        "problem": prob.summary(),
-        "channels": list(prob.channels),
+        "problem": full.summary(),
+        "channels": list(full.channels),
         "seed": run_info["seed"],
         "settings": run_info["settings"],
         "rounds": [{k: v for k, v in h.items() if isinstance(v, (int, float, str))} for h in state.history],
     }
 
 
-def _warnings(samples: np.ndarray, summary: dict, box, names, longitudinal: str) -> list[dict[str, Any]]:
-    """posterior.json's `warnings`: mass piled at the prior's edges, or a predictive band that
-    misses the recording, each pointing to `vdsbi diagnose`."""
-    rec, veh, out = (n if isinstance(n, (str, os.PathLike)) else None for n in names)
-    if rec is None:
-        rec = summary["recording"]
-    ppc = summary["ppc"]
-    problem = [{"kind": "recording", "message": w} for w in summary["problem"].get("warnings", ())]
-    return problem + trust_warnings(
-        samples,
-        list(summary["parameters"]),
-        box,
-        summary["not_identified"],
-        {"train": ppc["fraction_inside_90pct_band"], "held_out": ppc["fraction_inside_90pct_band_held_out"]},
-        diagnose_command(rec, veh, out, longitudinal),
-    )
+def _npe_check(npe_samples: np.ndarray, checked) -> dict[str, Any]:
+    """The neural posterior against the likelihood posterior of the same (training) data: the
+    squared Mahalanobis distance of its mean, in the likelihood posterior's logit coordinates
+    (≤ χ²_P(0.5): inside its 50 % region), and each parameter's std ratio."""
+    from scipy.stats import chi2
+
+    d2 = float(checked.mahalanobis2(npe_samples.mean(0))[0])
+    limit = float(chi2.ppf(0.5, len(checked.z)))
+    import jax
+
+    lik = np.asarray(checked.sample(jax.random.key(1), 2000), float)
+    spread = np.std(npe_samples, axis=0) / (np.std(lik, axis=0) + 1e-300)
+    ratio = {n: float(r) for n, r in zip(checked.names, spread)}
+    agree = d2 <= limit and all(0.5 <= r <= 2.0 for n, r in ratio.items() if n in checked.free)
+    return {
+        "mahalanobis2_of_npe_mean": d2,
+        "chi2_50pct": limit,
+        "std_ratio_npe_to_likelihood": ratio,
+        "agree": bool(agree),
+        "reported": "likelihood",
+        "why": "the neural posterior is trained on simulations with sensor noise only; the likelihood "
+        "posterior carries the model error the fit measured, and its best fit is the estimate",
+    }
 
 
-def _validation(prob: Problem, summary: dict, effects, compare) -> dict[str, Any]:
-    """Held-out scores of the posterior mean, and of the user's reference values (the
-    parameters a reference does not give are taken from the posterior mean)."""
+def _validation(prob: Problem, checked, npe_samples: np.ndarray, effects, compare) -> dict[str, Any]:
+    """Held-out scores of the training fit (the estimate's validation) and of the neural
+    posterior's mean; the user's reference values beside them (parameters a reference does not
+    give are taken from the fit)."""
+    if not prob.held.any():
+        return {}
     names = parameter_names(effects)
-    mean = np.array([summary["parameters"][n]["mean"] for n in names])
-    out = {"posterior_mean": _score(prob, mean, effects)}
-    if "refined" in summary:
-        refined = np.array([summary["refined"]["values"][n] for n in names])
-        out["refined"] = _score(prob, refined, effects)
+    out = {
+        "estimate": _score(prob, checked.theta, effects),
+        "npe_mean": _score(prob, npe_samples.mean(0), effects),
+        "what": "fitted on the training part, scored on the held-out part; the exported estimate "
+        "is then refit on all the driving",
+    }
     if compare:
         unknown = [k for k in compare if k not in names]
         if unknown:
             raise InputError(
                 "settings", "--compare", f"unknown parameter {unknown[0]!r}; known: {', '.join(names)}"
             )
-        ref = np.array([float(compare.get(n, m)) for n, m in zip(names, mean)])
+        ref = np.array([float(compare.get(n, m)) for n, m in zip(names, checked.theta)])
         out["reference"] = _score(prob, ref, effects) | {"given": {k: float(v) for k, v in compare.items()}}
     return out
 
 
-#: Posterior draws tried, beside the mean, as the refinement's start.
-REFINE_STARTS = 31
-
-
-def _refined(prob: Problem, summary: dict, samples: np.ndarray, box, effects, say) -> dict[str, Any]:
-    """The posterior mean refined by least squares over the training windows; parameters the
-    drive does not inform stay at their posterior mean (= the prior's)."""
-    from ..diagnostics import refine
-
-    names = parameter_names(effects)
-    mean = np.array([summary["parameters"][n]["mean"] for n in names])
-    free = [n for n in names if n not in summary["not_identified"]]
-    say(f"refining the point estimate by least squares over the training windows ({', '.join(free)})")
-    # Candidates: the mean and posterior draws (fixed parameters at the mean); the best start.
-    starts = np.concatenate([mean[None], samples[:REFINE_STARTS]])
-    fixed = [i for i, n in enumerate(names) if n not in free]
-    starts[:, fixed] = mean[fixed]
-    ref = refine(prob, starts, box, effects=effects, free=free)
-    return {
-        "method": "least squares from the posterior mean, channel scales profiled (diagnostics.refine)",
-        "values": {n: float(v) for n, v in zip(names, ref.theta)},
-        "free": list(ref.free),
-        "residual_rms": ref.scale,
-        "converged": ref.converged,
-    }
+def _warnings(samples: np.ndarray, summary: dict, box: Box, names, longitudinal: str) -> list[dict[str, Any]]:
+    """posterior.json's `warnings`: mass piled at the prior's edges, or a predictive band that
+    misses the recording, each pointing to `vdsbi diagnose`."""
+    rec, veh, out = (n if isinstance(n, (str, os.PathLike)) else None for n in names)
+    if rec is None:
+        rec = summary["recording"]
+    ppc = summary["ppc"]
+    bounds = {n: (float(a), float(b)) for n, a, b in zip(box.names, box.low, box.high)}
+    problem = [{"kind": "recording", "message": w} for w in summary["problem"].get("warnings", ())]
+    return problem + trust_warnings(
+        samples,
+        list(summary["parameters"]),
+        bounds,
+        summary["not_identified"],
+        {"train": ppc["fraction_inside_90pct_band"], "held_out": ppc["fraction_inside_90pct_band_held_out"]},
+        diagnose_command(rec, veh, out, longitudinal),
+    )
 
 
 def _score(prob: Problem, values: np.ndarray, effects) -> dict[str, Any]:
@@ -452,30 +524,13 @@ def _score(prob: Problem, values: np.ndarray, effects) -> dict[str, Any]:
     return validate(prob, np.asarray(theta), effects, eff_values)
 
 
-def posterior_predictive(key, prob: Problem, samples: np.ndarray, effects, n: int) -> dict[str, Any]:
-    """`n` posterior draws simulated with sensor noise on every window; 5/50/95 % bands."""
-    import jax.numpy as jnp
-
-    n = min(n, samples.shape[0])
-    wm = windowed_model(prob, effects)
-    theta, ep = split_parameters(jnp.asarray(samples[:n]), effects)
-    ys, ok = simulate_draws(key, wm, theta, sigma_raw=prob.sigma_raw, effect_params=ep)
-    ys = np.asarray(ys)[np.asarray(ok)]
-    q = np.quantile(ys, [0.05, 0.5, 0.95], axis=0) if ys.shape[0] else np.full((3, *ys.shape[1:]), np.nan)
-    return {"q05": q[0], "q50": q[1], "q95": q[2], "n": ys.shape[0]}
-
-
-def _ppc_summary(prob: Problem, ppc: dict[str, Any]) -> dict[str, Any]:
-    inside = (prob.y >= ppc["q05"]) & (prob.y <= ppc["q95"])
-    frac = lambda mask: {
-        c: (float(inside[..., i][mask].mean()) if ppc["n"] and mask.any() else None)
-        for i, c in enumerate(prob.channels)
-    }
+def _ppc_summary(prob: Problem, band: dict[str, Any]) -> dict[str, Any]:
     return {
-        "draws": int(ppc["n"]),
+        "draws": int(band["n"]),
+        "noise": "the likelihood fit's noise model (model error included)",
         # None when no posterior draw simulated successfully (no band to compare with).
-        "fraction_inside_90pct_band": frac(prob.train),
-        "fraction_inside_90pct_band_held_out": frac(prob.held),
+        "fraction_inside_90pct_band": band_coverage(prob, band, prob.train),
+        "fraction_inside_90pct_band_held_out": band_coverage(prob, band, prob.held),
     }
 
 

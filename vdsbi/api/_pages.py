@@ -23,26 +23,24 @@ def fmt(value: float | None, unit: str = "") -> str:
     return f"{value * display_unit(unit)[0]:.4g}"
 
 
-def parameter_rows(params: Mapping[str, Any], refined: Mapping[str, float] | None = None) -> list[list[str]]:
-    """Rows name, unit, mean, std, 90 % interval, prior[, refined point]."""
+def parameter_rows(params: Mapping[str, Any]) -> list[list[str]]:
+    """Rows name, unit, estimate, std, 90 % interval, prior."""
     rows = []
     for n, p in params.items():
         u = p["unit"]
         lo, hi = p["prior"]
-        row = [n, display_unit(u)[1], fmt(p["mean"], u), fmt(p["std"], u)]
+        row = [n, display_unit(u)[1], fmt(p.get("estimate", p["mean"]), u), fmt(p["std"], u)]
         if p.get("identified") is False:
             row[2:4] = ["not identified", "–"]
             row.append("–")
         else:
             row.append(f"[{fmt(p['q05'], u)}, {fmt(p['q95'], u)}]")
         row.append(f"[{fmt(lo, u)}, {fmt(hi, u)}]")
-        if refined:
-            row.append(fmt(refined.get(n), u) if p.get("identified") is not False else "–")
         rows.append(row)
     return rows
 
 
-PARAM_HEADER = ["parameter", "unit", "mean", "std", "90 % interval", "prior"]
+PARAM_HEADER = ["parameter", "unit", "estimate", "std", "90 % interval", "prior"]
 
 
 def warnings_block(summary: Mapping[str, Any]) -> str:
@@ -57,11 +55,12 @@ def warnings_block(summary: Mapping[str, Any]) -> str:
 
 
 def validation_rows(summary: Mapping[str, Any]) -> list[list[str]]:
-    """Per channel: held-out NRMSE and χ²/dof of the posterior mean (and the reference), share of
-    the recording inside the 90 % predictive band (fitted / held out)."""
+    """Per channel: held-out NRMSE and χ²/dof of the estimate (the fit of the training part), of the
+    neural posterior's mean and of the reference, share of the recording inside the 90 %
+    predictive band (fitted / held out)."""
     val = summary.get("validation", {})
-    mean = val.get("posterior_mean", {}).get("channels", {})
-    point = val.get("refined", {}).get("channels", {})
+    mean = val.get("estimate", {}).get("channels", {})
+    point = val.get("npe_mean", {}).get("channels", {})
     ref = val.get("reference", {}).get("channels", {})
     ppc = summary.get("ppc", {})
     inside = ppc.get("fraction_inside_90pct_band", {})
@@ -82,7 +81,7 @@ def validation_rows(summary: Mapping[str, Any]) -> list[list[str]]:
 def validation_header(summary: Mapping[str, Any]) -> list[str]:
     val = summary.get("validation", {})
     head = ["channel", "held-out NRMSE", "held-out χ²/dof"]
-    head += ["refined NRMSE", "refined χ²/dof"] if "refined" in val else []
+    head += ["NPE mean NRMSE", "NPE mean χ²/dof"] if "npe_mean" in val else []
     head += ["reference NRMSE", "reference χ²/dof"] if "reference" in val else []
     return [*head, "inside 90 % band (fitted)", "inside 90 % band (held out)"]
 
@@ -91,7 +90,6 @@ def identify_page(summary: Mapping[str, Any], folder: str | os.PathLike, also: S
     """The page of an identify folder (pictures read from `folder`)."""
     folder = Path(folder)
     effects = ", ".join(summary.get("effects") or []) or "none"
-    refined = summary.get("refined", {}).get("values")
     return H.page(
         f"vdsbi identify: {summary['recording']}",
         [
@@ -101,10 +99,7 @@ def identify_page(summary: Mapping[str, Any], folder: str | os.PathLike, also: S
             ),
             warnings_block(summary),
             H.heading("Posterior"),
-            H.table(
-                PARAM_HEADER + (["refined (least squares)"] if refined else []),
-                parameter_rows(summary["parameters"], refined),
-            ),
+            H.table(PARAM_HEADER, parameter_rows(summary["parameters"])),
             H.figure(folder / "pairplot.png", "Posterior pair plot over the prior box."),
             H.heading("Fit to the recording"),
             H.table(validation_header(summary), validation_rows(summary)),
@@ -200,10 +195,10 @@ def demo_page(
             *_demo_steps(runs, diagnosis, concealed),
             H.heading("Parameters: truth, before and after"),
             H.table(
-                ["parameter", "unit", "truth"] + [f"{label}: mean [90 %]" for label in labels],
+                ["parameter", "unit", "truth"] + [f"{label}: estimate [90 %]" for label in labels],
                 _truth_rows(truth, runs),
             ),
-            H.heading("Held-out driving: χ²/dof of each posterior mean / refined point (1: the noise level)"),
+            H.heading("Held-out driving: χ²/dof of each estimate (1: the sensor-noise level)"),
             H.table(["channel", *labels], held),
             H.figure(
                 folder / "before_after.png",
@@ -220,13 +215,9 @@ def demo_page(
 
 
 def _held_chi2(summ: Mapping[str, Any], channel: str) -> str:
-    """'mean / refined' held-out χ²/dof of a channel ('–' where a point did not simulate)."""
+    """The estimate's held-out χ²/dof of a channel ('–' where it did not simulate)."""
     val = summ.get("validation", {})
-    parts = [
-        val.get(k, {}).get("channels", {}).get(channel, {}).get("chi2_dof")
-        for k in ("posterior_mean", "refined")
-    ]
-    return " / ".join(fmt(v) for v in parts if v is not None or "refined" in val) or "–"
+    return fmt(val.get("estimate", {}).get("channels", {}).get(channel, {}).get("chi2_dof"))
 
 
 def _demo_steps(runs, diagnosis, concealed: str) -> list[str]:
@@ -256,7 +247,7 @@ def _demo_steps(runs, diagnosis, concealed: str) -> list[str]:
 
 
 def _truth_rows(truth: Mapping[str, float], runs) -> list[list[str]]:
-    """Per parameter of the last run: unit, truth, and each run's mean [90 %] (✓/✗ truth inside)."""
+    """Per parameter of the last run: unit, truth, and each run's estimate [90 %] (✓/✗ truth inside)."""
     rows = []
     for n, last in runs[-1][2]["parameters"].items():
         unit = last["unit"]
@@ -269,9 +260,9 @@ def _truth_rows(truth: Mapping[str, float], runs) -> list[list[str]]:
 
 
 def _with_interval(p: Mapping[str, Any], truth: float | None) -> str:
-    """'mean [q05, q95]' (✓ when the truth lies inside, ✗ when not)."""
+    """'estimate [q05, q95]' (✓ when the truth lies inside, ✗ when not)."""
     if p.get("identified") is False:
         return "not identified"
     u = p["unit"]
     mark = "" if truth is None else (" ✓" if p["q05"] <= truth <= p["q95"] else " ✗")
-    return f"{fmt(p['mean'], u)} [{fmt(p['q05'], u)}, {fmt(p['q95'], u)}]{mark}"
+    return f"{fmt(p.get('estimate', p['mean']), u)} [{fmt(p['q05'], u)}, {fmt(p['q95'], u)}]{mark}"

@@ -11,6 +11,7 @@ COMMANDS: tuple[str, ...] = (
     "._check",
     "._simulate",
     "._identify",
+    "._predict",
     "._sample",
     "._demo",
     "._observability",

@@ -12,7 +12,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         "export",
         help="write an identify result for other tools (Autoware MPC parameters, JSON, CSV)",
-        description="Read DIR/posterior.json (an identify folder) and write the posterior means with "
+        description="Read DIR/posterior.json (an identify folder) and write the estimates with "
         "their 90 % intervals: --format autoware writes a ROS 2 parameter file with vehicle.cf, "
         "vehicle.cr and vehicle.mass_fl/_fr/_rl/_rr as Autoware's mpc_lateral_controller reads them "
         "(vehicle_model_type: dynamics; cf/cr per axle, N/rad, as vdsbi's C_alpha_f/C_alpha_r), "

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from .. import api
+from ..io import InputError
 from . import _args
 
 
@@ -13,11 +14,18 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         "identify",
         help="identify the vehicle's parameters from a recording (posterior with uncertainty)",
-        description="Pick the usable stretch of REC, simulate, train a neural posterior (APT), and "
-        "write posterior.json, samples.csv, pairplot.png, ppc.png and the estimator into DIR. "
+        description="Pick the usable driving of REC, train a neural posterior (APT), fit the likelihood "
+        "posterior from it (best fit through the simulator, model error in the noise model), validate "
+        "on the held-out part, refit on all of it, and write posterior.json, samples.csv, plots and "
+        "the estimator into DIR. "
         "Each finished round is checkpointed in DIR; --resume continues an interrupted run.",
     )
-    p.add_argument("recording", metavar="REC", help="recording: .csv, .parquet or ROS2 bag")
+    p.add_argument(
+        "recording",
+        metavar="REC",
+        nargs="+",
+        help="recording: .csv, .parquet or ROS2 bag; several recordings of one car are identified jointly",
+    )
     p.add_argument("--vehicle", required=True, metavar="V", help="vehicle constants (.json or .yaml)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--rounds", type=int, default=2, help="APT rounds (default 2)")
@@ -58,9 +66,20 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         help="reference values {param: value} (e.g. a lab's) scored on the held-out driving too",
     )
     p.add_argument(
-        "--no-refine",
-        action="store_true",
-        help="skip the least-squares refinement of the point estimate (posterior.json `refined`)",
+        "--prior",
+        action="append",
+        default=[],
+        metavar="NAME=LO:HI",
+        help="uniform prior range of one parameter (e.g. signal_delay.delay=0.1:0.3, as `vdsbi diagnose` "
+        "prints it); repeatable",
+    )
+    p.add_argument(
+        "--holdout",
+        type=float,
+        default=0.3,
+        metavar="FRACTION",
+        help="share of the usable driving held out to validate on (default 0.3; 0: none). The "
+        "estimate is always refit on all of it",
     )
     p.add_argument("--rate", type=float, default=200.0, help="model rate, Hz (default 200)")
     return p
@@ -69,7 +88,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args) -> int:
     quiet = args.quiet
     res = api.identify(
-        args.recording,
+        args.recording if len(args.recording) > 1 else args.recording[0],
         args.vehicle,
         rounds=args.rounds,
         sims=args.sims,
@@ -85,7 +104,8 @@ def run(args) -> int:
         bandwidth="auto" if args.bandwidth is None else args.bandwidth,
         effects=_effects(args.effects),
         compare=_compare(args.compare),
-        refine=not args.no_refine,
+        priors=_priors(args.prior),
+        holdout=args.holdout,
         rate=args.rate,
         progress=not quiet and sys.stderr.isatty(),
         log=None if quiet else (lambda s: print(s, flush=True)),
@@ -103,6 +123,17 @@ def _effects(text: str | None) -> list[str] | None:
     if text is None:
         return None
     return [] if text.strip() == "none" else _args.effect_names(text.split(","))
+
+
+def _priors(items: list[str]) -> dict[str, tuple[float, float]] | None:
+    out = {}
+    for item in items:
+        name, _, rng = item.partition("=")
+        lo, sep, hi = rng.partition(":")
+        if not name or not sep:
+            raise InputError("--prior", item, "expected NAME=LO:HI")
+        out[name.strip()] = (_args.number(lo, "--prior", name), _args.number(hi, "--prior", name))
+    return out or None
 
 
 def _compare(text: str | None) -> dict[str, float] | None:

@@ -6,13 +6,17 @@ from ._calibration import (
     sbc_ks_pvalues as sbc_ks_pvalues,
     sbc_ranks as sbc_ranks,
 )
+from ._combinations import (
+    determined_directions as determined_directions,
+    vehicle_combinations as vehicle_combinations,
+)
 from ._design import (
     DesignProblem as DesignProblem,
     DesignResult as DesignResult,
     Limits as Limits,
     Maneuver as Maneuver,
     check_limits as check_limits,
-    design as design,
+    design_maneuver as design_maneuver,
     design_problem as design_problem,
 )
 from ._fisher import (
@@ -27,7 +31,7 @@ from ._fisher import (
     report_markdown as report_markdown,
     score_fisher_mc as score_fisher_mc,
 )
-from ._identifiability import identifiability as identifiability
+from ._identifiability import MAX_STD_RATIO as MAX_STD_RATIO, identifiability as identifiability
 from ._least_squares import (
     FitResult as FitResult,
     LeastSquaresResult as LeastSquaresResult,
@@ -36,10 +40,14 @@ from ._least_squares import (
     levenberg_marquardt as levenberg_marquardt,
     logit as logit,
 )
+from ._likelihood import (
+    LikelihoodPosterior as LikelihoodPosterior,
+    NoiseModel as NoiseModel,
+    fit_likelihood as fit_likelihood,
+)
 from ._misspecification import (
     Localisation as Localisation,
     MisspecificationTest as MisspecificationTest,
     locate_mismatch as locate_mismatch,
     misspecification_test as misspecification_test,
 )
-from ._refine import Refinement as Refinement, refine as refine

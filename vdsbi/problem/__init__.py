@@ -1,12 +1,17 @@
 """A recording plus a vehicle as one problem: windows, channels, noise, inputs, initial states, held-out."""
 
 from ._box import Box as Box
+from ._concat import concat_problems as concat_problems
 from ._limit import slides as slides
 from ._measured import (
     measured_longitudinal as measured_longitudinal,
     smoothed_yaw_rate as smoothed_yaw_rate,
 )
-from ._noise import dof_factor as dof_factor, lag1_autocorrelation as lag1_autocorrelation
+from ._noise import (
+    dof_factor as dof_factor,
+    integrated_autocorrelation_time as integrated_autocorrelation_time,
+    lag1_autocorrelation as lag1_autocorrelation,
+)
 from ._parameters import (
     parameter_names as parameter_names,
     parameter_units as parameter_units,
@@ -26,5 +31,11 @@ from ._simulate import (
     simulate_draws as simulate_draws,
     windowed_model as windowed_model,
 )
-from ._validate import channel_scores as channel_scores, predict as predict, validate as validate
+from ._validate import (
+    band_coverage as band_coverage,
+    channel_scores as channel_scores,
+    predict as predict,
+    predictive_band as predictive_band,
+    validate as validate,
+)
 from ._windows import Window as Window, choose_windows as choose_windows

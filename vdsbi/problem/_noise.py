@@ -54,3 +54,33 @@ def dof_factor(rho: np.ndarray) -> np.ndarray:
     """Effective independent samples per sample for AR(1) residuals: (1 − ρ)/(1 + ρ), ≤ 1."""
     rho = np.clip(np.asarray(rho, dtype=float), 0.0, 0.99)
     return (1.0 - rho) / (1.0 + rho)
+
+
+def integrated_autocorrelation_time(residual: np.ndarray, mask: np.ndarray, max_lag: int = 250) -> np.ndarray:
+    """τ = 1 + 2·Σ_k ρ_k per channel of a (W, K, C) residual over masked (W, K) samples.
+
+    N correlated samples carry the information of N/τ independent ones. The autocovariance is
+    pooled over windows (lags never cross a window edge) and summed by Geyer's initial positive
+    sequence (pairs ρ_{2j} + ρ_{2j+1} while positive), so a slowly varying model error gets a
+    large τ and white noise τ ≈ 1. τ never exceeds the longest window's sample count.
+    """
+    mask = np.asarray(mask, bool)
+    r = np.where(mask[..., None], residual, 0.0)
+    r = r - np.sum(r, axis=(0, 1)) / max(mask.sum(), 1)
+    r = np.where(mask[..., None], r, 0.0)
+    lags = min(max_lag, r.shape[1] - 1)
+    cov = np.empty((lags + 1, r.shape[-1]))
+    for k in range(lags + 1):
+        both = (mask[:, k:] & mask[:, : r.shape[1] - k])[..., None]
+        cov[k] = np.sum(np.where(both, r[:, k:] * r[:, : r.shape[1] - k], 0.0), axis=(0, 1))
+    rho = cov / (cov[0] + 1e-300)
+    tau = np.ones(r.shape[-1])
+    for c in range(r.shape[-1]):
+        total = -1.0  # ρ_0 counted once: τ = −1 + 2·Σ_j (ρ_2j + ρ_2j+1)
+        for j in range(0, lags, 2):
+            pair = rho[j, c] + rho[j + 1, c]
+            if pair <= 0:
+                break
+            total += 2.0 * pair
+        tau[c] = max(1.0, total)
+    return np.minimum(tau, max(1, int(mask.sum(1).max())))

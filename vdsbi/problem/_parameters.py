@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import jax.numpy as jnp
 
@@ -23,15 +23,29 @@ def parameter_units(effects: Sequence[str] = ()) -> dict[str, str]:
     return out
 
 
-def prior_box(vehicle: Vehicle, effects: Sequence[str] = ()) -> dict[str, tuple[float, float]]:
-    """Uniform prior box: the vehicle's θ box, then each effect parameter's typical range;
-    vehicle.json's `prior` may override any of them by its full name (``tyre_friction.scale``)."""
+def prior_box(
+    vehicle: Vehicle, effects: Sequence[str] = (), overrides: Mapping[str, tuple[float, float]] | None = None
+) -> dict[str, tuple[float, float]]:
+    """Uniform prior box: the vehicle's θ box, then each effect parameter's fit bounds widened to
+    hold its null value (what any car could have, not only the typical one); vehicle.json's
+    `prior`, then `overrides` (e.g. the ranges a diagnosis measured), replace any of them by full
+    name (``signal_delay.delay``).
+
+    Raises:
+        ValueError: an override for an unknown parameter, or with low ≥ high.
+    """
     box = dict(vehicle.default_prior())
     for e in effects:
         eff = get_effect(e)
-        for p, rng in zip(eff.param_names, eff.typical):
+        for p, (lo, hi), null in zip(eff.param_names, eff.bounds, eff.null):
             name = f"{e}.{p}"
-            box[name] = tuple(float(v) for v in vehicle.prior.get(name, rng))
+            box[name] = tuple(float(v) for v in vehicle.prior.get(name, (min(lo, null), max(hi, null))))
+    for name, (lo, hi) in (overrides or {}).items():
+        if name not in box:
+            raise ValueError(f"prior for unknown parameter {name!r}; known: {', '.join(box)}")
+        if not float(lo) < float(hi):
+            raise ValueError(f"prior for {name}: low {lo} must be below high {hi}")
+        box[name] = (float(lo), float(hi))
     return box
 
 

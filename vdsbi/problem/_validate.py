@@ -72,3 +72,45 @@ def validate(
     if effects:
         out["effects"] = {e: dict(v) for e, v in (effect_values or {}).items()}
     return out
+
+
+def predictive_band(
+    key,
+    problem: Problem,
+    draws,
+    noise_std,
+    effects: Sequence[str] = (),
+    solver: Solver = Solver(),
+) -> dict:
+    """The 5/50/95 % posterior-predictive band of every window's compared samples.
+
+    Each draw (…, 6 + P: θ then the effects' parameters) is simulated noise-free, and Gaussian
+    noise of the noise model's per-sample std (C,) is added: the band a new recording of the
+    same driving should fall in, model error included.
+
+    Returns:
+        {"q05", "q50", "q95": (W, K, C) arrays, "n": draws that simulated}.
+    """
+    import jax
+
+    from ._parameters import split_parameters
+
+    wm = windowed_model(problem, effects, solver)
+    theta, ep = split_parameters(np.asarray(draws, float), effects)
+    ys, ok = simulate_draws(None, wm, theta, effect_params=ep)
+    ys = np.asarray(ys)[np.asarray(ok)]
+    ys = ys + np.asarray(noise_std) * np.asarray(jax.random.normal(key, ys.shape))
+    if not ys.shape[0]:
+        nan = np.full(problem.y.shape, np.nan)
+        return {"q05": nan, "q50": nan, "q95": nan, "n": 0}
+    q = np.quantile(ys, [0.05, 0.5, 0.95], axis=0)
+    return {"q05": q[0], "q50": q[1], "q95": q[2], "n": int(ys.shape[0])}
+
+
+def band_coverage(problem: Problem, band: dict, mask: np.ndarray) -> dict[str, float | None]:
+    """Share of `mask`'s measured samples inside the 90 % band, per channel (None: no band)."""
+    inside = (problem.y >= band["q05"]) & (problem.y <= band["q95"])
+    return {
+        c: (float(inside[..., i][mask].mean()) if band["n"] and mask.any() else None)
+        for i, c in enumerate(problem.channels)
+    }

@@ -1,0 +1,69 @@
+"""The likelihood posterior: the best fit through the simulator, the model-error noise model and the
+Laplace covariance."""
+
+import numpy as np
+
+from vdsbi.diagnostics import fit_likelihood
+from vdsbi.io import build_recording
+from vdsbi.problem import Box, ProblemSettings, make_problem, prior_box
+from vdsbi.simulator import (
+    CHANNELS,
+    PARAM_NAMES,
+    SEED_TRUE_THETA,
+    Inputs,
+    default_vehicle,
+    simulate,
+    theta_from_dict,
+)
+
+THETA = np.asarray(theta_from_dict(SEED_TRUE_THETA))
+
+
+def _drive(duration=24.0, dt=0.005, noise=(0.05, 0.002), steer_delay=0.0):
+    t = np.arange(0.0, duration, dt)
+    steer = 0.02 * np.sin(2 * np.pi * t / 3.0) + 0.01 * np.sin(2 * np.pi * t / 1.3)
+    torque = np.full_like(t, 150.0)
+    acting = np.interp(t - steer_delay, t, steer)
+    inputs = Inputs(0.0, dt, acting, 0.6 * torque, 0.4 * torque)
+    ys, ok = simulate(THETA, inputs, default_vehicle(), v0=15.0)
+    assert ok
+    rng = np.random.default_rng(1)
+    cols = {"t": t, "steer": steer}
+    for i, c in enumerate(CHANNELS):
+        cols[c] = ys[:, i]
+    cols["ay"] = cols["ay"] + noise[0] * rng.standard_normal(len(t))
+    cols["yaw_rate"] = cols["yaw_rate"] + noise[1] * rng.standard_normal(len(t))
+    return build_recording(cols, "drive.csv")
+
+
+def test_the_fit_recovers_the_stiffnesses_from_a_poor_start_and_its_interval_holds_them(x64, getkey):
+    veh = default_vehicle()
+    prob = make_problem(_drive(), veh, ProblemSettings(longitudinal="speed", max_window=6.0))
+    box = Box.from_dict(prior_box(veh), PARAM_NAMES)
+    start = THETA.copy()
+    start[4:] *= 0.7
+    post = fit_likelihood(prob, start, box, free=("C_alpha_f", "C_alpha_r"), reweights=1, max_steps=20)
+    assert post.free == ("C_alpha_f", "C_alpha_r")
+    np.testing.assert_allclose(post.theta[:4], start[:4], rtol=1e-3)  # fixed ones stay
+    for name, truth in zip(PARAM_NAMES[4:], THETA[4:]):
+        assert abs(post.theta[PARAM_NAMES.index(name)] / truth - 1) < 0.03, name
+    # The speed-driven model of a torque-driven drive: the residual is near the sensor noise.
+    assert np.all(post.noise.model_error_ratio < 2.5), post.noise.to_dict()
+    draws = np.asarray(post.sample(getkey(), 4000))
+    lo, hi = np.quantile(draws, [0.025, 0.975], axis=0)
+    assert np.all((THETA[4:] >= lo[4:]) & (THETA[4:] <= hi[4:]))
+    assert post.mahalanobis2(post.theta)[0] < 1e-6
+
+
+def test_a_model_error_widens_the_interval_by_its_own_scale_and_correlation(x64):
+    # The drive's steer acts 0.15 s late; the model has no delay. The residual is then model
+    # error, far above the sensor noise, and the interval widens with it.
+    veh = default_vehicle()
+    settings = ProblemSettings(longitudinal="speed", max_window=6.0)
+    box = Box.from_dict(prior_box(veh), PARAM_NAMES)
+    free = ("C_alpha_f", "C_alpha_r")
+    clean = fit_likelihood(make_problem(_drive(), veh, settings), THETA, box, free=free, max_steps=20)
+    late = fit_likelihood(make_problem(_drive(steer_delay=0.15), veh, settings), THETA, box, free=free, max_steps=20)
+    assert np.all(late.noise.model_error_ratio > 3.0 * clean.noise.model_error_ratio)
+    i = [PARAM_NAMES.index(n) for n in free]
+    assert np.all(np.sqrt(np.diag(late.cov_z))[i] > 3.0 * np.sqrt(np.diag(clean.cov_z))[i])

@@ -1,0 +1,75 @@
+"""What a drive determines when single parameters are not identified: the combinations a vehicle
+engineer reads, and the best-determined directions of the posterior.
+
+A mild drive (small slip angles) fixes the steady-state yaw response of the linear single-track
+model, not each stiffness: the understeer gradient
+
+    K = (m/L)·(l_r/C_αf − l_f/C_αr)   [rad per m/s² of lateral acceleration]
+
+and the steady-state yaw-rate gain r/δ = v/(L + K·v²) (Milliken & Milliken, *Race Car Vehicle
+Dynamics*, ch. 5; Rajamani, *Vehicle Dynamics and Control*, §3.3). Both are evaluated on
+posterior draws, so their intervals are the posterior's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..simulator import GRAVITY, Vehicle
+
+#: A direction of log-parameters counts as determined when its posterior std is below this
+#: fraction of its prior std (the identifiability rule's ratio).
+DETERMINED_RATIO = 0.5
+
+
+def _interval(x: np.ndarray) -> dict[str, float]:
+    q = np.quantile(x, [0.025, 0.5, 0.975])
+    return {"median": float(q[1]), "q025": float(q[0]), "q975": float(q[2]), "std": float(np.std(x))}
+
+
+def vehicle_combinations(
+    samples: np.ndarray, names: Sequence[str], vehicle: Vehicle, speed: float
+) -> dict[str, dict]:
+    """Understeer gradient (deg/g) and steady-state yaw-rate gain at `speed` (1/s) over (N, P)
+    posterior draws, with 95 % intervals."""
+    idx = {n: names.index(n) for n in ("l_f", "C_alpha_f", "C_alpha_r")}
+    lf, cf, cr = (samples[:, idx[n]] for n in ("l_f", "C_alpha_f", "C_alpha_r"))
+    m, L = vehicle.mass, vehicle.wheelbase
+    k = (m / L) * ((L - lf) / cf - lf / cr)  # rad / (m/s²)
+    gain = speed / (L + k * speed**2)
+    return {
+        "understeer_gradient": {"unit": "deg/g", "at": None} | _interval(np.degrees(k) * GRAVITY),
+        "yaw_rate_gain": {"unit": "1/s", "at": round(float(speed), 2)} | _interval(gain),
+    }
+
+
+def determined_directions(
+    samples: np.ndarray, prior_samples: np.ndarray, names: Sequence[str], free: Sequence[str]
+) -> list[dict]:
+    """Directions in log-parameter space (of the `free` parameters) that the drive determines:
+    eigenvectors of the posterior covariance of log θ whose std is below `DETERMINED_RATIO` of
+    the prior's std along them, best first; each as {"weights": {name: w}, "std", "ratio"}
+    (|w| summing to 1, small weights dropped)."""
+    idx = [names.index(n) for n in free if np.all(samples[:, names.index(n)] > 0)]
+    if not idx:
+        return []
+    logs = np.log(samples[:, idx])
+    prior = np.log(prior_samples[:, idx])
+    vals, vecs = np.linalg.eigh(np.cov(logs, rowvar=False).reshape(len(idx), len(idx)))
+    out = []
+    for v, w in zip(vals, vecs.T):
+        prior_std = float(np.std(prior @ w))
+        ratio = float(np.sqrt(max(v, 0.0)) / prior_std)
+        if ratio > DETERMINED_RATIO:
+            continue
+        w = w / np.sum(np.abs(w)) * np.sign(w[np.argmax(np.abs(w))])
+        out.append(
+            {
+                "weights": {names[i]: round(float(x), 3) for i, x in zip(idx, w) if abs(x) >= 0.05},
+                "std": float(np.sqrt(max(v, 0.0))),
+                "ratio": ratio,
+            }
+        )
+    return sorted(out, key=lambda d: d["ratio"])
