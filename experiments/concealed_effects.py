@@ -2,7 +2,7 @@
 
 Makes recordings in which one effect, two effects or none are concealed, WRITES THEM AS FILES
 (recording.csv, vehicle.json with noise_std; the truth in a separate truth.json that the
-diagnosis never reads), runs `vdsbi.discovery.diagnose` on the two files alone, and scores
+diagnosis never reads), runs `vdsbi.discovery.diagnose_mismatch` on the two files alone, and scores
 what it found against truth.json.
 
 Generator (documented so the ranges can be judged):
@@ -57,7 +57,7 @@ sys.path.insert(0, str(ROOT / "experiments"))
 
 import outside_physics  # noqa: E402
 
-from vdsbi.discovery import diagnose, effect_names  # noqa: E402
+from vdsbi.discovery import diagnose_mismatch, effect_names  # noqa: E402
 from vdsbi.simulator import (  # noqa: E402
     CHANNELS,
     EFFECTS,
@@ -515,7 +515,6 @@ def plan(args):
             kw["candidates"] = ("road_grade", "rolling_resistance", "sensor_bias", "wheel_radius_error")
             return [(("sensor_bias", "wheel_radius_error"), None)], 8.0, kw, "concealed_effects_multi_quick"
         kw["candidates"] = ("road_grade", "rolling_resistance", "imu_misalignment", "sensor_bias")
-        kw["top_pairs"] = 2
         return [((), None), (("sensor_bias",), None)], 8.0, kw, "concealed_effects_quick"
     if args.suite == "multi":
         return [(e, None) for e in MULTI], 20.0, {}, "concealed_effects_multi"
@@ -599,7 +598,7 @@ def main(argv=None) -> int:
             make_case(i, effects, args.seed, duration, folder, solver, kind)
         t0 = time.perf_counter()
         try:
-            res = diagnose(folder / "recording.csv", folder / "vehicle.json", plots=False, **kw)
+            res = diagnose_mismatch(folder / "recording.csv", folder / "vehicle.json", plots=False, **kw)
         except Exception:
             traceback.print_exc()
             continue

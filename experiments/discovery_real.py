@@ -25,7 +25,7 @@ sys.path.insert(0, str(ROOT))
 
 import jax  # noqa: E402
 
-from vdsbi.discovery import diagnose  # noqa: E402
+from vdsbi.discovery import diagnose_mismatch  # noqa: E402
 
 QUICK_CANDIDATES = ("tyre_friction", "sensor_scale", "yaw_inertia")
 
@@ -47,7 +47,7 @@ def run_one(drive: Path, mode: str, out: Path, quick: bool) -> dict:
         return json.loads((folder / "report.json").read_text())
     kw = {"candidates": QUICK_CANDIDATES, "max_windows": 3, "max_terms": 1} if quick else {}
     t0 = time.perf_counter()
-    res = diagnose(
+    res = diagnose_mismatch(
         drive / "recording.csv", drive / "vehicle.json", folder, longitudinal=mode, quiet=False, **kw
     )
     res.report["seconds"] = time.perf_counter() - t0

@@ -35,7 +35,7 @@ sys.path.insert(0, str(ROOT / "experiments"))
 
 from concealed_effects import make_case  # noqa: E402
 
-from vdsbi.discovery import diagnose  # noqa: E402
+from vdsbi.discovery import diagnose_mismatch  # noqa: E402
 
 
 def gyro_scale(df):
@@ -85,7 +85,7 @@ def main(argv=None) -> int:
             df = CORRUPTIONS[name](pd.read_csv(folder / "recording.csv"))
             df.to_csv(folder / "recording.csv", index=False, float_format="%.10g")
         t0 = time.perf_counter()
-        res = diagnose(folder / "recording.csv", folder / "vehicle.json", plots=False)
+        res = diagnose_mismatch(folder / "recording.csv", folder / "vehicle.json", plots=False)
         rep = res.report
         row = {
             "corruption": name,

@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vdsbi.diagnostics._design import Limits, Maneuver, check_limits, design, design_problem
+from vdsbi.diagnostics import Limits, Maneuver, check_limits, design_maneuver, design_problem
 from vdsbi.simulator import PARAM_NAMES, SEED_TRUE_THETA, default_vehicle, make_model
 
 THETA = jnp.asarray([SEED_TRUE_THETA[n] for n in PARAM_NAMES])
@@ -45,7 +45,7 @@ def test_design_increases_information_within_limits(x64):
     model = make_model(default_vehicle())
     problem = design_problem(model, THETA, LIMITS, target="C_kappa_r")
     start = Maneuver.seed_like(LIMITS)
-    res = design(problem, start, num_steps=3, learning_rate=0.1)
+    res = design_maneuver(problem, start, num_steps=3, learning_rate=0.1)
     info = res.history["information"]
     assert res.best_step > 0
     assert info[res.best_step] > info[0] + 0.05  # −log CRB variance of C_kappa_r rose

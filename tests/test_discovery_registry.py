@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vdsbi.discovery import diagnose, effect_names, effect_space, single_candidates
+from vdsbi.discovery import diagnose_mismatch, effect_names, effect_space, single_candidates
 from vdsbi.io import build_recording
 from vdsbi.simulator import (
     CHANNELS,
@@ -74,11 +74,11 @@ def test_registered_effect_is_searched_by_diagnose():
         space = effect_space()
         assert space.slices[TowPull.name].stop == space.num_params  # appended last, one parameter
         rec = _recording(vehicle, force=600.0)
-        res = diagnose(
+        res = diagnose_mismatch(
             rec,
             vehicle,
             candidates=(TowPull.name, "sensor_bias"),
-            top_pairs=0,
+            max_effects=1,
             num_draws=50,
             single_iters=6,
             final_iters=10,

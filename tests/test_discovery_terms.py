@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vdsbi.discovery import Fitter, discover_terms, effect_space, fit_data, select_terms
+from vdsbi.discovery import Fitter, discover_terms, effect_space, select_terms
 from vdsbi.io import build_recording
 from vdsbi.problem import make_problem
 from vdsbi.simulator import (
@@ -61,11 +61,10 @@ def _recording(seed: int, c: float, key: str = "side_quadratic"):
 
 def _discover(seed, c, key="side_quadratic"):
     rec, vehicle = _recording(seed, c, key)
-    data = fit_data(make_problem(rec, vehicle), "train")
-    fitter = Fitter(vehicle, data, dt=0.005, effects=effect_space(()))
+    fitter = Fitter(make_problem(rec, vehicle), dt=0.005, effects=effect_space(()))
     z0 = fitter.initial_z(np.array([SEED_TRUE_THETA[n] for n in PARAM_NAMES]))
     base = fitter.fit((), z0, max_iter=20)
-    return discover_terms(vehicle, data, base, fitter, (), max_terms=2, candidates=CANDIDATES), base
+    return discover_terms(base, fitter, (), max_terms=2, candidates=CANDIDATES), base
 
 
 @pytest.mark.parametrize("key,c,words", ADDED, ids=[a[0] for a in ADDED])
@@ -99,38 +98,42 @@ def test_formula_reads_as_an_equation():
     assert term_formula("side_constant", -0.2).startswith("lateral force += -0.2·m ")
 
 
-def _found(p_before, p_after, effects=("torque_gain",), terms=None, p_terms=None):
+def _section(p_before, p_after, held_after, held_terms, effects=("torque_gain",), terms=None, p_terms=None):
     from types import SimpleNamespace as NS
+
+    from vdsbi.discovery import terms_section
 
     td = None
     if terms is not None:
         fit = NS() if terms else None
         td = NS(terms=terms, fit=fit, dropped=[], screened={}, gain=10.0 if terms else None)
-    return NS(
-        test_before=NS(p_value=p_before),
-        test_after=NS(p_value=p_after),
-        test_terms=NS(p_value=p_terms),
-        final=NS(effects=effects),
+    return terms_section(
+        p_before=p_before,
+        p_after=p_after,
+        chosen=effects,
         terms=td,
+        p_terms=p_terms,
+        held_after=held_after,
+        held_terms=held_terms,
+        n_held=100,
+        alpha=0.05,
     )
 
 
 def test_explanation_says_what_explained_the_mismatch():
-    from vdsbi.discovery import terms_section
-
     held = {"ay": {"chi2_dof": 1.3}, "yaw_rate": {"chi2_dof": 1.2}}
     better = {"ay": {"chi2_dof": 1.0}, "yaw_rate": {"chi2_dof": 1.0}}
     same = {"ay": {"chi2_dof": 1.299}, "yaw_rate": {"chi2_dof": 1.2}}
     term = [{"formula": "ay measured as ay + 0.05·ay (c in -)"}]
-    assert terms_section(_found(0.3, 0.3, ()), held, None, 100, 0.05)["explanation"] == "none"
-    assert terms_section(_found(0.001, 0.2), better, None, 100, 0.05)["explanation"] == "library"
+    assert _section(0.3, 0.3, held, None, ())["explanation"] == "none"
+    assert _section(0.001, 0.2, better, None)["explanation"] == "library"
     # the residual test passes but the held-out χ²/dof stays above 1.1: not claimed
-    assert terms_section(_found(0.001, 0.2), held, None, 100, 0.05)["explanation"] == "unexplained"
-    out = terms_section(_found(0.001, 0.001, terms=term, p_terms=0.3), held, better, 100, 0.05)
+    assert _section(0.001, 0.2, held, None)["explanation"] == "unexplained"
+    out = _section(0.001, 0.001, held, better, terms=term, p_terms=0.3)
     assert out["explanation"] == "discovered term" and out["held_out_gain"] == pytest.approx(25.0)
     assert "ay + 0.05·ay" in out["sentence"]
     # a term that does not predict the held-out part better is not claimed
-    out = terms_section(_found(0.001, 0.001, terms=term, p_terms=0.3), held, same, 100, 0.05)
+    out = _section(0.001, 0.001, held, same, terms=term, p_terms=0.3)
     assert out["explanation"] == "unexplained" and "does not predict" in out["sentence"]
-    out = terms_section(_found(0.001, 0.001, (), terms=[]), held, None, 100, 0.05)
+    out = _section(0.001, 0.001, held, None, (), terms=[])
     assert out["explanation"] == "unexplained" and "left unexplained" in out["sentence"]

@@ -177,8 +177,8 @@ def _limits(duration, max_steer, max_drive, max_brake, brake_front_share, speed_
 
 
 def _optimise(problem, start, steps: int, learning_rate: float, say: Callable[[str], None]):
-    """`vdsbi.diagnostics.design` with a progress line every 10 steps."""
-    from ..diagnostics import design as run_design
+    """`vdsbi.diagnostics.design_maneuver` with a progress line every 10 steps."""
+    from ..diagnostics import design_maneuver
 
     t0 = time.perf_counter()
 
@@ -190,7 +190,9 @@ def _optimise(problem, start, steps: int, learning_rate: float, say: Callable[[s
             )
 
     try:
-        return run_design(problem, start, num_steps=steps, learning_rate=learning_rate, callback=progress)
+        return design_maneuver(
+            problem, start, num_steps=steps, learning_rate=learning_rate, callback=progress
+        )
     except ValueError as err:
         raise InputError("limits", "value", str(err)) from None
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from .. import api
-from ..io import load_drive
+from ..io import load_drive, output_dir
 from . import _args
 
 
@@ -15,9 +15,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         help="locate where a recording and the model disagree, name the missing physics, fix it",
         description="Identify θ with the base model, test it for misspecification (calibrated "
         "p-value), locate the mismatch (channels, time windows, bands), rank the simulator's "
-        "effects alone and in pairs by evidence, re-identify with the chosen effect(s) and compare "
-        "the fit before/after on a held-out part of the recording. Writes report.json, report.md "
-        "and figures to DIR.",
+        "effects by evidence, adding them one at a time while it supports them, re-identify with "
+        "the chosen effect(s) and compare the fit before/after on a held-out part of the "
+        "recording. Writes report.json, report.md and figures to DIR.",
     )
     p.add_argument("recording", metavar="REC", help="recording: .csv, .parquet or ROS2 bag")
     p.add_argument("--vehicle", required=True, metavar="V", help="vehicle constants (.json or .yaml)")
@@ -25,9 +25,6 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists")
     p.add_argument("--alpha", type=float, default=0.05, help="level of the misspecification test")
     p.add_argument("--seed", type=int, default=0, help="seed of the test's simulated null")
-    p.add_argument(
-        "--top-pairs", type=int, default=3, help="0: consider single effects only (kept for old scripts)"
-    )
     p.add_argument(
         "--max-effects", type=int, default=3, help="most effects the forward search adds (default 3)"
     )
@@ -62,14 +59,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args) -> int:
     candidates = None if args.effects is None else _args.effect_names(args.effects.split(","))
     rec, vehicle = load_drive(args.recording, args.vehicle)
-    with api.output_dir(args.out, overwrite=args.overwrite) as d:
+    with output_dir(args.out, overwrite=args.overwrite) as d:
         res = api.diagnose(
             rec,
             vehicle,
             d,
             seed=args.seed,
             alpha=args.alpha,
-            top_pairs=args.top_pairs,
             max_effects=args.max_effects,
             max_terms=args.max_terms,
             candidates=candidates,

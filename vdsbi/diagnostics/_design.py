@@ -3,15 +3,16 @@
 A `Maneuver` holds unconstrained parameters; `Maneuver.inputs(limits)` maps them onto the
 sample grid inside the hard limits by construction:
 
-  * steer(t) = max_steer · tanh(Σ_k a_k sin(2π f_k t + φ_k)), f_k ∈ [f_min, f_max] (sigmoid);
+  * steer(t) = max_steer · tanh(Σ_k a_k sin(2π f_k t + φ_k)), f_k ∈ [f_min, f_max] (the
+    `vdsbi.problem.Box` `Limits.frequencies`);
   * a pedal level ℓ(t) ∈ [−1, 1]: M segments whose lengths are a softmax share of the
     duration and whose levels are tanh-bounded, joined by sigmoid edges of width
     `edge_time`; ℓ > 0 drives the front axle (ℓ·max_drive; front-wheel drive), ℓ < 0 brakes
     with the vehicle's fixed brake balance (front share ℓ·max_brake·front_share, rear the rest);
-  * v0 ∈ [v0_min, v0_max] (sigmoid).
+  * v0 ∈ [v0_min, v0_max] (`Limits.speeds`).
 
 The limits that depend on the response — |ay| ≤ ay_fraction·μ·g and vx inside the speed
-window — are penalised through the simulated readings, and `design` returns the best
+window — are penalised through the simulated readings, and `design_maneuver` returns the best
 iterate that satisfies every limit exactly (the initial maneuver must, and is checked).
 """
 
@@ -27,6 +28,7 @@ import numpy as np
 import optax
 from jaxtyping import Array, Float
 
+from ..problem import Box
 from ..simulator import (
     CHANNELS,
     GRAVITY,
@@ -39,7 +41,6 @@ from ..simulator import (
     solve,
 )
 from ._fisher import noise_model, scaled_fisher
-from ._least_squares import logit
 
 _AY = CHANNELS.index("ay")
 _VX = CHANNELS.index("vx")
@@ -88,6 +89,15 @@ class Limits(eqx.Module):
         if not 0 <= self.brake_front_share <= 1:
             raise ValueError("limits: 'brake_front_share' must lie in [0, 1]")
 
+    def frequencies(self, num: int) -> Box:
+        """The box of `num` steer frequencies, [f_min, f_max] Hz each."""
+        names = tuple(f"frequency_{k}" for k in range(num))
+        return Box(jnp.full(num, float(self.f_min)), jnp.full(num, float(self.f_max)), names)
+
+    def speeds(self) -> Box:
+        """The box of the initial speed, [v0_min, v0_max] m/s."""
+        return Box(jnp.array([float(self.v0_min)]), jnp.array([float(self.v0_max)]), ("v0",))
+
     @property
     def num_samples(self) -> int:
         return int(round(self.duration * self.rate)) + 1
@@ -120,25 +130,23 @@ class Maneuver(eqx.Module):
         """A start close to the seed's maneuver at 10.5 m/s: 0.05 rad steer at 0.25 Hz
         (small extra sines at 0.5 and 1 Hz), drive then brake at the seed's levels."""
         f = np.array([0.25, 0.5, 1.0, 1.5, 0.75, 0.35][:num_sines])
-        frac = (f - limits.f_min) / (limits.f_max - limits.f_min)
         amp = np.zeros(num_sines)
         amp[0] = math.atanh(min(0.05 / limits.max_steer, 0.99))
         amp[1:] = 0.05
         drive = min(600.0 / limits.max_drive, 0.99)
         brake = min(1200.0 / limits.max_brake, 0.99)
         levels = np.array([drive if i < num_segments // 2 else -brake for i in range(num_segments)])
-        v0 = (10.5 - limits.v0_min) / (limits.v0_max - limits.v0_min)
         return cls(
             steer_amp=jnp.asarray(amp),
-            steer_freq=jnp.asarray(logit(frac, eps=1e-6)),
+            steer_freq=limits.frequencies(num_sines).to_unbounded(f, edge=1e-6),
             steer_phase=jnp.zeros(num_sines),
             pedal_level=jnp.asarray(np.arctanh(levels)),
             pedal_length=jnp.zeros(num_segments),
-            v0=jnp.asarray(float(logit(v0, eps=1e-6))),
+            v0=limits.speeds().to_unbounded(jnp.array([10.5]), edge=1e-6)[0],
         )
 
     def initial_speed(self, limits: Limits) -> Float[Array, ""]:
-        return limits.v0_min + (limits.v0_max - limits.v0_min) * jax.nn.sigmoid(self.v0)
+        return limits.speeds().from_unbounded(self.v0[None])[0]
 
     def pedal(self, limits: Limits) -> Float[Array, " T"]:
         """ℓ(t) ∈ [−1, 1] on the sample grid."""
@@ -157,7 +165,7 @@ class Maneuver(eqx.Module):
 
     def inputs(self, limits: Limits) -> Inputs:
         t = jnp.arange(limits.num_samples) / limits.rate
-        freq = limits.f_min + (limits.f_max - limits.f_min) * jax.nn.sigmoid(self.steer_freq)
+        freq = limits.frequencies(self.steer_freq.shape[0]).from_unbounded(self.steer_freq)
         s = jnp.sum(
             self.steer_amp[:, None] * jnp.sin(2 * jnp.pi * freq[:, None] * t + self.steer_phase[:, None]), 0
         )
@@ -169,7 +177,7 @@ class Maneuver(eqx.Module):
         return Inputs(0.0, 1.0 / limits.rate, steer, tf, tr)
 
     def describe(self, limits: Limits) -> dict:
-        freq = limits.f_min + (limits.f_max - limits.f_min) * jax.nn.sigmoid(self.steer_freq)
+        freq = limits.frequencies(self.steer_freq.shape[0]).from_unbounded(self.steer_freq)
         share = jax.nn.softmax(self.pedal_length)
         return {
             "v0": float(self.initial_speed(limits)),
@@ -323,7 +331,7 @@ def feasible(obj: Objective, tol: float = 0.0) -> bool:
     return bool(obj.ok) and float(obj.ay_excess) <= tol and float(obj.speed_excess) <= tol
 
 
-def design(
+def design_maneuver(
     problem: DesignProblem,
     initial: Maneuver,
     *,

@@ -6,22 +6,15 @@ from ._candidates import (
     EffectSpace as EffectSpace,
     effect_names as effect_names,
     effect_space as effect_space,
-    pair_candidates as pair_candidates,
     single_candidates as single_candidates,
 )
-from ._data import fit_data as fit_data, held_out_metrics as held_out_metrics
-from ._diagnose import (
-    DiagnoseSettings as DiagnoseSettings,
-    DiagnosisResult as DiagnosisResult,
-    default_identify as default_identify,
-    diagnose as diagnose,
-)
-from ._fit import FitData as FitData, FitResult as FitResult, Fitter as Fitter
+from ._data import held_out_scores as held_out_scores
+from ._diagnose import diagnose_mismatch as diagnose_mismatch
+from ._fit import Fitter as Fitter
 from ._rank import (
     HELD_OUT_CLAIM as HELD_OUT_CLAIM,
     PAIR_LOG_PRIOR as PAIR_LOG_PRIOR,
     STRONG as STRONG,
-    Ranked as Ranked,
     bic_score as bic_score,
     choose as choose,
     merge as merge,
@@ -31,9 +24,16 @@ from ._rank import (
     worst_channel as worst_channel,
 )
 from ._report import REQUIRED_KEYS as REQUIRED_KEYS, write_report as write_report
-from ._search import ForwardSearch as ForwardSearch, Step as Step, forward_search as forward_search
-from ._terms import (
+from ._results import (
+    DiagnosisResult as DiagnosisResult,
+    DiscoveryFit as DiscoveryFit,
+    Ranked as Ranked,
     TermDiscovery as TermDiscovery,
+    Verdict as Verdict,
+)
+from ._search import ForwardSearch as ForwardSearch, Step as Step, forward_search as forward_search
+from ._settings import DiagnoseSettings as DiagnoseSettings, map_fit as map_fit
+from ._terms import (
     discover_terms as discover_terms,
     select_terms as select_terms,
     terms_section as terms_section,

@@ -1,11 +1,11 @@
-"""Candidate explanations: "none", each registered effect alone, and pairs among the strongest
-singles; and where the candidates' parameters sit in the fit. Everything is read from the effect
-registry (`vdsbi.simulator.EFFECTS`) at call time, so effects registered after import count."""
+"""Candidate explanations: "none" and each registered effect alone (sets of several are built
+by the forward search); and where the candidates' parameters sit in the fit. Everything is
+read from the effect registry (`vdsbi.simulator.EFFECTS`) at call time, so effects registered
+after import count."""
 
 from __future__ import annotations
 
 import dataclasses
-import itertools
 from collections.abc import Sequence
 
 import numpy as np
@@ -90,19 +90,6 @@ LOOKALIKE_GROUPS: tuple[tuple[str, ...], ...] = (
 def single_candidates(names: Sequence[str] | None = None) -> list[tuple[str, ...]]:
     """The effects `names` (default: every registered effect), one at a time."""
     return [(e,) for e in (effect_names() if names is None else names)]
-
-
-def pair_candidates(ranked_singles: Sequence[str], top: int = 3) -> list[tuple[str, ...]]:
-    """Pairs among the `top` best-ranked singles, each in registry order (all pairs cost too
-    much to fit; a pair whose members both add nothing alone is rarely the answer, and the
-    pairs that are skipped are listed in the report)."""
-    order = effect_names()
-    best = list(ranked_singles)[:top]
-    return [tuple(sorted(p, key=order.index)) for p in itertools.combinations(best, 2)]
-
-
-def all_pairs(names: Sequence[str] | None = None) -> list[tuple[str, ...]]:
-    return list(itertools.combinations(effect_names() if names is None else names, 2))
 
 
 def label(effects: Sequence[str]) -> str:

@@ -7,13 +7,14 @@ effects, their fit bounds and starting values are read from the registry
 (`vdsbi.simulator.EFFECTS`, each effect's `bounds` and `start`) when a `Fitter` is built, so
 an effect added with `register_effect` is searched like a built-in one.
 
-The readings are `vdsbi.simulator.solve`'s fixed-step RK4 (plain jnp in `lax.scan`, so
-forward-mode differentiable); the fit is `vdsbi.diagnostics.levenberg_marquardt` with a
-forward-mode Jacobian over a fixed-width vector of free parameters (the candidate's free
-entries of z, padded), one compilation for all candidates.
+The readings are the problem's own `vdsbi.problem.WindowedModel` around the super-model
+(fixed-step RK4 in `lax.scan`, so forward-mode differentiable); the fit is
+`vdsbi.diagnostics.levenberg_marquardt` with a forward-mode Jacobian over a fixed-width vector
+of free parameters (the candidate's free entries of z, padded), one compilation for all
+candidates.
 
-Parameters live in an unbounded space z: θ = lo + (hi − lo)·sigmoid(z) inside the vehicle's
-prior box, effect parameters likewise inside their effect's `bounds`, initial speeds
+Parameters live in an unbounded space z: θ inside the vehicle's prior box and the effect
+parameters inside their effects' `bounds`, each through a `vdsbi.problem.Box`; initial speeds
 v0 = v0_meas + z (m/s). A weak Gaussian N(0, 3²) on z (N(0, 1 m/s) on v0) regularises flat
 directions.
 
@@ -22,35 +23,27 @@ Noise model: additive white Gaussian sensor noise, independent per channel with 
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, Float
 
-from ..diagnostics import laplace_covariance, levenberg_marquardt, logit
-from ..simulator import (
-    CHANNELS,
-    EFFECTS,
-    PARAM_NAMES,
-    Decimator,
-    Inputs,
-    Solver,
-    Vehicle,
-    VehicleModel,
-    make_model,
-    solve,
-    steady_lateral_state,
-)
+from ..diagnostics import laplace_covariance, levenberg_marquardt
+from ..problem import Box, Problem, WindowedModel, windowed_model
+from ..simulator import EFFECTS, PARAM_NAMES, Solver, Vehicle, VehicleModel, make_model
 from ._candidates import EffectSpace, effect_space
+from ._results import DiscoveryFit
 
 #: Prior std of z (θ and effect parameters) and of the initial speed, m/s.
 Z_PRIOR_STD = 3.0
 V0_PRIOR_STD = 1.0
 #: Largest step of one z coordinate in one iteration (a sigmoid saturates past |z| ≈ 5).
 MAX_Z_STEP = 2.0
+#: Unit-box coordinates of starting values are clipped to [EDGE, 1 − EDGE] before the logit.
+EDGE = 1e-9
 
 
 def super_model(vehicle: Vehicle, effects: EffectSpace, longitudinal: str = "torque") -> VehicleModel:
@@ -64,173 +57,90 @@ def super_model(vehicle: Vehicle, effects: EffectSpace, longitudinal: str = "tor
     return VehicleModel(vehicle=vehicle, effects=mods, longitudinal=longitudinal)
 
 
-class FitData(eqx.Module):
-    """What the fit conditions on: W equal-length windows of a problem (`vdsbi.problem`).
+class Space(eqx.Module):
+    """Maps the unbounded vector z = [z_θ (6), z_v0 (W), z_effects (E)] to physical values.
 
     Attributes:
-        inputs: driver inputs, each leaf stacked over windows (W, T) at the model rate.
-        measured: (W, K, C) measured channels at the compared samples.
-        sigma: (C,) noise std of the compared samples, channel units.
-        mask: (W, K) 1 where a sample enters the fit, else 0.
-        v0_meas: (W,) measured initial speed per window, m/s.
-        r0: (W,) measured initial yaw rate per window (with θ: the initial lateral state).
-        decimator: the filter shared with the measurement, or None (compared = model rate).
-        channel_index: indices of the measured channels in `CHANNELS` (static).
-        channels: their names (static).
-        longitudinal: "torque" or "speed" (static).
+        theta: the prior box of θ.
+        effects: the fit box of every effect parameter, flat.
+        null: (E,) values at which each effect vanishes.
+        slices: each effect's (start, stop) in the flat effect vector.
     """
 
-    inputs: Inputs
-    measured: jax.Array
-    sigma: jax.Array
-    mask: jax.Array
-    v0_meas: jax.Array
-    r0: jax.Array
-    decimator: Decimator | None
-    channel_index: tuple[int, ...] = eqx.field(static=True)
-    channels: tuple[str, ...] = eqx.field(static=True)
-    longitudinal: str = eqx.field(static=True, default="torque")
+    theta: Box
+    effects: Box
+    null: Float[Array, " E"]
+    slices: tuple[tuple[int, int], ...] = eqx.field(static=True)
 
-    @property
-    def num_windows(self) -> int:
-        return int(self.measured.shape[0])
-
-
-class Space(eqx.Module):
-    """Maps the unbounded vector z = [z_θ (6), z_v0 (W), z_effects (E)] to physical values."""
-
-    theta_lo: jax.Array
-    theta_hi: jax.Array
-    eff_lo: jax.Array
-    eff_hi: jax.Array
-    eff_null: jax.Array
-    eff_bounds: tuple[tuple[int, int], ...] = eqx.field(static=True)
-
-    def split(self, z, num_windows):
+    def split(self, z, num_windows: int):
         return z[:6], z[6 : 6 + num_windows], z[6 + num_windows :]
 
-    def theta(self, z_theta):
-        return self.theta_lo + (self.theta_hi - self.theta_lo) * jax.nn.sigmoid(z_theta)
-
-    def effects(self, z_eff, active) -> tuple[jax.Array, ...]:
+    def effect_params(self, z_eff, active) -> tuple[jax.Array, ...]:
         """One parameter vector per effect; inactive ones at their null values."""
-        val = self.eff_lo + (self.eff_hi - self.eff_lo) * jax.nn.sigmoid(z_eff)
-        flat = jnp.where(active, val, self.eff_null)
-        return tuple(flat[a:b] for a, b in self.eff_bounds)
+        flat = jnp.where(active, self.effects.from_unbounded(z_eff), self.null)
+        return tuple(flat[a:b] for a, b in self.slices)
 
 
 def make_space(vehicle: Vehicle, effects: EffectSpace) -> Space:
-    prior = vehicle.default_prior()
+    names = tuple(f"{e}.{p}" for e in effects.names for p in effects.classes[e].param_names)
     return Space(
-        theta_lo=jnp.array([prior[n][0] for n in PARAM_NAMES]),
-        theta_hi=jnp.array([prior[n][1] for n in PARAM_NAMES]),
-        eff_lo=jnp.asarray(effects.lo),
-        eff_hi=jnp.asarray(effects.hi),
-        eff_null=jnp.asarray(effects.null),
-        eff_bounds=tuple((s.start, s.stop) for s in effects.slices.values()),
+        theta=Box.from_dict(vehicle.default_prior(), PARAM_NAMES),
+        effects=Box(jnp.asarray(effects.lo), jnp.asarray(effects.hi), names),
+        null=jnp.asarray(effects.null),
+        slices=tuple((s.start, s.stop) for s in effects.slices.values()),
     )
 
 
-def _predict(model, space, data: FitData, z, active, solver):
-    """(W, K, 6) readings of every window at the compared samples; each window starts from its
-    measured speed and yaw rate with the steady-state side speed under θ."""
-    zt, zv, ze = space.split(z, data.num_windows)
-    theta = space.theta(zt)
-    ep = space.effects(ze, active)
+class _Target(eqx.Module):
+    """The fitted samples: the windowed super-model and what it is compared with."""
 
-    def one(inputs, v0, r0):
-        lateral0 = jnp.stack(steady_lateral_state(theta, model.vehicle, v0, r0))
-        ys = solve(model, theta, inputs, v0, ep, solver, lateral0=lateral0)[0]
-        return ys if data.decimator is None else data.decimator(ys)
-
-    return jax.vmap(one)(data.inputs, data.v0_meas + zv, data.r0)
+    wm: WindowedModel
+    measured: Float[Array, "W K C"]
+    sigma: Float[Array, " C"]
+    mask: Float[Array, "W K"]
 
 
-def _whitened(model, space, data, z, active, solver):
-    y = _predict(model, space, data, z, active, solver)[:, :, list(data.channel_index)]
-    r = (y - data.measured) / data.sigma
-    r = jnp.where(data.mask[:, :, None] > 0, r, 0.0)
+def _readings(wm: WindowedModel, space: Space, z, active) -> Float[Array, "W K C"]:
+    """The compared samples of every window at z; each window starts from its measured speed
+    plus its fitted offset."""
+    zt, zv, ze = space.split(z, wm.v0.shape[0])
+    ys, _ = wm(space.theta.from_unbounded(zt), space.effect_params(ze, active), v0=wm.v0 + zv)
+    return ys
+
+
+def _whitened(space: Space, target: _Target, z, active):
+    r = (_readings(target.wm, space, z, active) - target.measured) / target.sigma
+    r = jnp.where(target.mask[:, :, None] > 0, r, 0.0)
     return r.reshape(-1)
 
 
 @eqx.filter_jit
-def _residual(model, space, data, z, active, solver):
-    return _whitened(model, space, data, z, active, solver)
+def _readings_jit(wm, space, z, active):
+    return _readings(wm, space, z, active)
 
 
 @eqx.filter_jit
-def _predict_jit(model, space, data, z, active, solver):
-    return _predict(model, space, data, z, active, solver)
+def _readings_jacobian(wm, space, z, active, free):
+    return jax.jacfwd(lambda y: _readings(wm, space, z.at[free].set(y), active))(z[free])
 
 
 @eqx.filter_jit
-def _predict_jacobian(model, space, data, z, active, free, solver):
-    fn = lambda y: _predict(model, space, data, z.at[free].set(y), active, solver)
-    return jax.jacfwd(fn)(z[free])
-
-
-@eqx.filter_jit
-def _fit_free(model, space, data, z, active, free, prec, max_iter, tol, solver):
+def _fit_free(space, target, z, active, free, prec, max_iter, tol):
     """Levenberg–Marquardt over the entries `free` of z (padded with an out-of-range index,
     whose slots nothing reads: their prior keeps them at 0)."""
-    fn = lambda y: _whitened(model, space, data, z.at[free].set(y, mode="drop"), active, solver)
+    fn = lambda y: _whitened(space, target, z.at[free].set(y, mode="drop"), active)
     y0 = jnp.where(free < z.size, z[jnp.minimum(free, z.size - 1)], 0.0)
     return levenberg_marquardt(
         fn, y0, prior_precision=prec, max_steps=max_iter, rtol=tol, max_step=MAX_Z_STEP
     )
 
 
-@dataclasses.dataclass
-class FitResult:
-    """A converged (or best-found) MAP fit of one candidate.
-
-    Attributes:
-        effects: names of the active effects.
-        z: (P,) full unbounded parameter vector.
-        theta: (6,) θ in PARAM_NAMES order.
-        theta_std: (6,) Laplace std of θ.
-        v0: (W,) fitted initial speeds, m/s.
-        effect_params: {effect: {param: value}}.
-        effect_std: {effect: {param: Laplace std}}.
-        chi2: Σ r² over the fitted samples (whitened residual).
-        num_samples: number of fitted residual entries N.
-        num_params: number of free parameters (θ, v0s, effect parameters).
-        residual: (N,) whitened residual at the optimum (masked entries are 0).
-        jacobian: (N, K) Jacobian at the optimum along the free columns.
-        free: indices of the free entries of z (K,).
-        iterations: LM iterations used.
-        converged: whether the relative cost change fell below tolerance.
-        cov: (K, K) Laplace covariance of the free entries of z (inflated by χ²/dof > 1).
-    """
-
-    effects: tuple[str, ...]
-    z: np.ndarray
-    theta: np.ndarray
-    theta_std: np.ndarray
-    v0: np.ndarray
-    effect_params: dict
-    effect_std: dict
-    chi2: float
-    num_samples: int
-    num_params: int
-    residual: np.ndarray
-    jacobian: np.ndarray
-    free: np.ndarray
-    iterations: int
-    converged: bool
-    cov: np.ndarray | None = None
-
-    @property
-    def chi2_dof(self) -> float:
-        return self.chi2 / max(1, self.num_samples - self.num_params)
-
-
 class Fitter:
-    """Fits candidates on one `FitData` with one compiled kernel.
+    """Fits candidates on the training part of a problem with one compiled kernel.
 
     Args:
-        vehicle: vehicle constants.
-        data: the windows to fit.
+        problem: the problem; its windows holding training samples are fitted
+            (`Problem.select("train")`).
         dt: RK4 step, s (5 ms for the search, the simulator's default 2.5 ms for the test
             and the final fit).
         effects: the candidate effects (default: every registered effect, read now).
@@ -240,26 +150,37 @@ class Fitter:
 
     def __init__(
         self,
-        vehicle: Vehicle,
-        data: FitData,
+        problem: Problem,
         dt: float = 0.0025,
         effects: EffectSpace | None = None,
         free_effects: int | None = None,
     ):
-        self.vehicle = vehicle
+        self.problem = problem.select("train")
+        self.vehicle = problem.vehicle
         self.effects = effect_space() if effects is None else effects
-        self.model = super_model(vehicle, self.effects, data.longitudinal)
-        self.space = make_space(vehicle, self.effects)
-        self.data = data
+        self.model = super_model(self.vehicle, self.effects, problem.longitudinal)
+        self.space = make_space(self.vehicle, self.effects)
         self.dt = float(dt)
         self.solver = Solver(dt=self.dt)
-        w = data.num_windows
+        train = self.problem
+        self.target = _Target(
+            wm=self.windowed(train),
+            measured=jnp.asarray(train.y),
+            sigma=jnp.asarray(train.sigma),
+            mask=jnp.asarray(train.train.astype(float)),
+        )
+        w = train.num_windows
+        self.num_windows = w
         self.num_params = 6 + w + self.effects.num_params
         most = self.effects.max_pair_params if free_effects is None else int(free_effects)
         self.width = 6 + w + most
-        self.num_residuals = int(np.asarray(data.mask).sum()) * len(data.channels)
+        self.num_residuals = int(train.train.sum()) * len(train.channels)
         e = self.effects
-        self._z_eff_start = logit((e.start - e.lo) / (e.hi - e.lo))
+        self._z_eff_start = np.asarray(self.space.effects.to_unbounded(e.start, edge=EDGE))
+
+    def windowed(self, problem: Problem) -> WindowedModel:
+        """The super-model over the windows of `problem`."""
+        return windowed_model(problem, solver=self.solver, model=self.model)
 
     def initial_z(self, theta0: np.ndarray | None = None) -> np.ndarray:
         prior = self.vehicle.default_prior()
@@ -267,14 +188,13 @@ class Fitter:
             # Middle of the prior box in z (geometric for the stiffnesses).
             theta0 = np.array([np.sqrt(prior[n][0] * prior[n][1]) for n in PARAM_NAMES])
             theta0[0] = 0.5 * (prior["l_f"][0] + prior["l_f"][1])
-        lo, hi = np.asarray(self.space.theta_lo), np.asarray(self.space.theta_hi)
-        zt = logit((np.asarray(theta0) - lo) / (hi - lo))
-        return np.concatenate([zt, np.zeros(self.data.num_windows), self._z_eff_start])
+        zt = np.asarray(self.space.theta.to_unbounded(np.asarray(theta0, float), edge=EDGE))
+        return np.concatenate([zt, np.zeros(self.num_windows), self._z_eff_start])
 
     def _effect_index(self, effect: str) -> np.ndarray:
         """Indices in z of an effect's parameters."""
         s = self.effects.slices[effect]
-        return 6 + self.data.num_windows + np.arange(s.start, s.stop)
+        return 6 + self.num_windows + np.arange(s.start, s.stop)
 
     def active_mask(self, effects: Sequence[str]) -> np.ndarray:
         act = np.zeros(self.effects.num_params, dtype=bool)
@@ -283,7 +203,7 @@ class Fitter:
         return act
 
     def free_index(self, effects: Sequence[str], fix_theta: bool = False) -> np.ndarray:
-        w = self.data.num_windows
+        w = self.num_windows
         idx = [] if fix_theta else list(range(6))
         idx += list(range(6, 6 + w))
         for e in effects:
@@ -291,32 +211,66 @@ class Fitter:
         return np.asarray(idx, dtype=int)
 
     def _prior_prec(self) -> np.ndarray:
-        w = self.data.num_windows
+        w = self.num_windows
         prec = np.full(self.num_params, 1.0 / Z_PRIOR_STD**2)
         prec[6 : 6 + w] = 1.0 / V0_PRIOR_STD**2
         return prec
 
-    def residual(self, z, effects: Sequence[str], data: FitData | None = None) -> np.ndarray:
-        act = jnp.asarray(self.active_mask(effects))
-        d = self.data if data is None else data
-        return np.asarray(_residual(self.model, self.space, d, jnp.asarray(z), act, self.solver))
-
-    def predict(self, z, effects: Sequence[str], data: FitData | None = None) -> np.ndarray:
-        """(W, T, 6) noise-free readings on `data` (default: the fitted windows)."""
-        act = jnp.asarray(self.active_mask(effects))
-        d = self.data if data is None else data
-        return np.asarray(_predict_jit(self.model, self.space, d, jnp.asarray(z), act, self.solver))
-
-    def prediction_variance(self, fit: FitResult, data: FitData | None = None) -> np.ndarray:
-        """(W, T, 6) variance of the predicted readings on `data` that the fit's parameter
-        uncertainty (its Laplace covariance, linearised) carries."""
-        act = jnp.asarray(self.active_mask(fit.effects))
-        d = self.data if data is None else data
-        jac = _predict_jacobian(
-            self.model, self.space, d, jnp.asarray(fit.z), act, jnp.asarray(fit.free), self.solver
+    def _on(self, problem: Problem | None):
+        """(z layout map, windows not fitted) for predictions on `problem`'s windows: each
+        index of the fitted z and where it sits in that problem's z; and the indices there
+        of the initial-speed offsets of windows the fit did not see (at 0)."""
+        if problem is None:
+            return None, np.zeros(0, int)
+        w, wt = self.num_windows, problem.num_windows
+        where = {win: j for j, win in enumerate(problem.windows)}
+        missing = [win for win in self.problem.windows if win not in where]
+        if missing:
+            raise ValueError(f"predict: fitted windows {missing} are not windows of the problem")
+        to = np.concatenate(
+            [
+                np.arange(6),
+                6 + np.array([where[win] for win in self.problem.windows], dtype=int),
+                6 + wt + np.arange(self.effects.num_params),
+            ]
         )
-        jac = np.asarray(jac)
-        return np.einsum("...k,kl,...l->...", jac, fit.cov, jac)
+        fitted = set(to[6 : 6 + w].tolist())
+        unseen = np.array([6 + j for j in range(wt) if 6 + j not in fitted], dtype=int)
+        return to, unseen
+
+    def _z_on(self, z, problem: Problem | None) -> np.ndarray:
+        to, _ = self._on(problem)
+        if to is None:
+            return np.asarray(z)
+        out = np.zeros(6 + problem.num_windows + self.effects.num_params)
+        out[to] = z
+        return out
+
+    def predict(self, z, effects: Sequence[str], problem: Problem | None = None) -> np.ndarray:
+        """(W, K, C) noise-free compared samples of the windows of `problem` (default: the
+        fitted ones, truncated after the last training sample); windows the fit did not see
+        start from their measured speed."""
+        act = jnp.asarray(self.active_mask(effects))
+        wm = self.target.wm if problem is None else self.windowed(problem)
+        return np.asarray(_readings_jit(wm, self.space, jnp.asarray(self._z_on(z, problem)), act))
+
+    def prediction_variance(self, fit: DiscoveryFit, problem: Problem | None = None) -> np.ndarray:
+        """(W, K, C) variance of `predict`'s samples that the fit's parameter uncertainty (its
+        Laplace covariance, linearised) carries; the initial speeds of windows the fit did not
+        see keep their prior std `V0_PRIOR_STD` (inflated like the fit's covariance)."""
+        act = jnp.asarray(self.active_mask(fit.effects))
+        to, unseen = self._on(problem)
+        free, cov = (fit.free, fit.cov) if to is None else (to[fit.free], fit.cov)
+        if unseen.size:
+            k = len(free)
+            grown = np.zeros((k + unseen.size,) * 2)
+            grown[:k, :k] = cov
+            grown[k:, k:] = np.eye(unseen.size) * V0_PRIOR_STD**2 * max(1.0, fit.chi2_dof)
+            free, cov = np.concatenate([free, unseen]), grown
+        wm = self.target.wm if problem is None else self.windowed(problem)
+        z = jnp.asarray(self._z_on(fit.z, problem))
+        jac = np.asarray(_readings_jacobian(wm, self.space, z, act, jnp.asarray(free)))
+        return np.einsum("...k,kl,...l->...", jac, cov, jac)
 
     def fit(
         self,
@@ -326,7 +280,7 @@ class Fitter:
         max_iter: int = 30,
         tol: float = 1e-6,
         fix_theta: bool = False,
-    ) -> FitResult:
+    ) -> DiscoveryFit:
         """MAP fit: `levenberg_marquardt` on ½|r|² + ½ Σ prec·z² over the free parameters.
 
         `z0` warm-starts (e.g. from the base fit); entries of newly activated effects are
@@ -349,57 +303,51 @@ class Fitter:
         prec[:k] = self._prior_prec()[free]
         act = jnp.asarray(self.active_mask(effects))
         sol = _fit_free(
-            self.model,
             self.space,
-            self.data,
+            self.target,
             jnp.asarray(z),
             act,
             jnp.asarray(index),
             jnp.asarray(prec),
             jnp.asarray(max_iter),
             jnp.asarray(tol, dtype=z.dtype),
-            self.solver,
         )
         z[free] = np.asarray(sol.z)[:k]
         r, jac = np.asarray(sol.residual), np.asarray(sol.jacobian)[:, :k]
         return self._result(effects, z, r, jac, free, prec[:k], int(sol.num_steps), bool(sol.converged))
 
-    def _result(self, effects, z, r, jac, free, prec, iterations, converged) -> FitResult:
-        w = self.data.num_windows
+    def _result(self, effects, z, r, jac, free, prec, iterations, converged) -> DiscoveryFit:
+        w = self.num_windows
         chi2 = float(r @ r)
-        k = len(free)
-        dof = max(1, self.num_residuals - k)
+        dof = max(1, self.num_residuals - len(free))
         # Laplace covariance in z; inflated by χ²/dof when > 1 (noise under-stated or model
         # misspecified: the usual quasi-likelihood correction).
         cov_z = np.asarray(laplace_covariance(jnp.asarray(jac), jnp.asarray(prec))) * max(1.0, chi2 / dof)
-        sd_free = np.sqrt(np.clip(np.diag(cov_z), 0, None))
         sd_z = np.zeros(self.num_params)
-        sd_z[free] = sd_free
-        zt, zv, ze = z[:6], z[6 : 6 + w], z[6 + w :]
-        sig = lambda x: 1.0 / (1.0 + np.exp(-x))
-        tlo, thi = np.asarray(self.space.theta_lo), np.asarray(self.space.theta_hi)
-        theta = tlo + (thi - tlo) * sig(zt)
-        theta_std = (thi - tlo) * sig(zt) * (1 - sig(zt)) * sd_z[:6]
-        elo, ehi = self.effects.lo, self.effects.hi
-        eval_ = elo + (ehi - elo) * sig(ze)
-        esd = (ehi - elo) * sig(ze) * (1 - sig(ze)) * sd_z[6 + w :]
+        sd_z[free] = np.sqrt(np.clip(np.diag(cov_z), 0, None))
+        zt, zv, ze = self.space.split(z, w)
+        theta_box, eff_box = self.space.theta, self.space.effects
+        theta = np.asarray(theta_box.from_unbounded(zt))
+        theta_std = np.asarray(theta_box.dtheta_dz(zt)) * sd_z[:6]
+        eval_ = np.asarray(eff_box.from_unbounded(ze))
+        esd = np.asarray(eff_box.dtheta_dz(ze)) * sd_z[6 + w :]
         params, stds = {}, {}
         for e in effects:
             s = self.effects.slices[e]
             names = self.effects.classes[e].param_names
             params[e] = {n: float(v) for n, v in zip(names, eval_[s])}
             stds[e] = {n: float(v) for n, v in zip(names, esd[s])}
-        return FitResult(
+        return DiscoveryFit(
             effects=tuple(effects),
             z=z.copy(),
             theta=theta,
             theta_std=theta_std,
-            v0=np.asarray(self.data.v0_meas) + zv,
+            v0=np.asarray(self.problem.v0) + zv,
             effect_params=params,
             effect_std=stds,
             chi2=chi2,
             num_samples=self.num_residuals,
-            num_params=k,
+            num_params=len(free),
             residual=r,
             jacobian=jac,
             free=free,
@@ -407,7 +355,3 @@ class Fitter:
             converged=converged,
             cov=cov_z,
         )
-
-
-def channel_indices(names: Sequence[str]) -> tuple[int, ...]:
-    return tuple(CHANNELS.index(n) for n in names)

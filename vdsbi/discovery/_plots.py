@@ -6,8 +6,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..simulator import CHANNELS
-
 
 def write_plots(result, out: Path) -> None:
     """residual_heatmap.png, overlay.png and residual_spectra.png in ``out``."""
@@ -71,13 +69,12 @@ def _plot_overlay(plt, result):
     fig, axes = plt.subplots(len(chans), 1, figsize=(10, 1.8 * len(chans)), sharex=True, squeeze=False)
     for c, name in enumerate(chans):
         ax = axes[c, 0]
-        k = CHANNELS.index(name)
         for w in range(win.num_windows):
             v = win.valid[w]
             t = win.t_out[w]
             ax.plot(t[v], win.y[w, v, c], color="0.6", lw=0.6, label="measured" if w == 0 else None)
-            ax.plot(t[v], p0[w, v, k], color="C3", lw=1, label="before" if w == 0 else None)
-            ax.plot(t[v], p1[w, v, k], color="C0", lw=1, label="after" if w == 0 else None)
+            ax.plot(t[v], p0[w, v, c], color="C3", lw=1, label="before" if w == 0 else None)
+            ax.plot(t[v], p1[w, v, c], color="C0", lw=1, label="after" if w == 0 else None)
             if win.held[w].any():
                 ax.axvspan(t[win.held[w]].min(), t[win.held[w]].max(), color="0.92", zorder=0)
         ax.set_ylabel(name)

@@ -25,7 +25,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ._candidates import LOOKALIKE_GROUPS, label
-from ._fit import FitResult
+from ._results import DiscoveryFit, Ranked
 
 #: Log Bayes factor counted as strong evidence (odds 20:1).
 STRONG = 3.0
@@ -38,25 +38,13 @@ PAIR_LOG_PRIOR = -STRONG
 HELD_OUT_CLAIM = 1.1
 
 
-@dataclasses.dataclass
-class Ranked:
-    name: str
-    effects: tuple[str, ...]
-    score: float
-    log_bayes_factor: float
-    probability: float
-    chi2: float
-    num_effect_params: int
-    fit: FitResult
-
-
-def bic_score(fit: FitResult, base: FitResult) -> float:
+def bic_score(fit: DiscoveryFit, base: DiscoveryFit) -> float:
     k = fit.num_params - base.num_params
     n = max(base.num_samples, 2)
     return 0.5 * (base.chi2 - fit.chi2) - 0.5 * k * np.log(n)
 
 
-def rank(fits: dict[tuple[str, ...], FitResult], base: FitResult) -> list[Ranked]:
+def rank(fits: dict[tuple[str, ...], DiscoveryFit], base: DiscoveryFit) -> list[Ranked]:
     """Candidates sorted by score (log posterior odds vs "none"; best first), with posterior
     probabilities."""
     rows = []
@@ -164,7 +152,7 @@ def _cos(a, b):
     return float(a @ b / (na * nb)) if na > 0 and nb > 0 else 0.0
 
 
-def separability(ranked: Sequence[Ranked], base: FitResult) -> list[dict]:
+def separability(ranked: Sequence[Ranked], base: DiscoveryFit) -> list[dict]:
     """For each look-alike group: can its members be told apart on this recording?
 
     Signatures are the fitted changes of the whitened prediction, s_e = r_e − r_none. Two
@@ -188,7 +176,7 @@ def separability(ranked: Sequence[Ranked], base: FitResult) -> list[dict]:
     return out
 
 
-def _lag_vs_stiffness(lag: Ranked, base: FitResult) -> dict:
+def _lag_vs_stiffness(lag: Ranked, base: DiscoveryFit) -> dict:
     """steering_lag against a cornering-stiffness change: the share of the lag's signature in
     the span of the base fit's C_alpha_f, C_alpha_r Jacobian columns."""
     sig = lag.fit.residual - base.residual
@@ -216,7 +204,7 @@ def _lag_vs_stiffness(lag: Ranked, base: FitResult) -> dict:
     }
 
 
-def _pair_verdict(a: str, b: str, ra: Ranked, rb: Ranked, base: FitResult) -> dict:
+def _pair_verdict(a: str, b: str, ra: Ranked, rb: Ranked, base: DiscoveryFit) -> dict:
     """Whether single effects ``a`` and ``b`` can be told apart: by evidence, with the
     correlation of their fitted signatures as the reason when they cannot."""
     rho = _cos(ra.fit.residual - base.residual, rb.fit.residual - base.residual)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -13,16 +13,16 @@ from ..diagnostics import Localisation, MisspecificationTest
 from ..problem import Problem
 from ..simulator import PARAM_NAMES
 from ._candidates import label
-from ._data import held_out_from, held_out_metrics
-from ._fit import FitResult, Fitter
+from ._data import held_out_from
+from ._fit import Fitter
 from ._plots import write_plots
-from ._rank import PAIR_LOG_PRIOR, STRONG, Ranked, verdict, worst_channel
+from ._rank import PAIR_LOG_PRIOR, STRONG
+from ._results import DiagnosisResult, DiscoveryFit, Ranked, TermDiscovery, Verdict
 from ._search import describe
-from ._terms import terms_section
 
 if TYPE_CHECKING:  # annotations only (_diagnose imports this module)
     from ..io import Recording
-    from ._diagnose import DiagnoseSettings, DiagnosisResult
+    from ._settings import DiagnoseSettings
 
 REQUIRED_KEYS = ("mismatch_detected", "p_value", "located", "effects", "chosen", "fit", "theta")
 
@@ -44,11 +44,11 @@ def _effect_rows(ranked: Sequence[Ranked]) -> list[dict]:
     ]
 
 
-def _at_bounds(fit: FitResult, fitter: Fitter, frac: float = 0.01) -> list[str]:
+def _at_bounds(fit: DiscoveryFit, fitter: Fitter, frac: float = 0.01) -> list[str]:
     """Names of fitted values within `frac` of their box's edge (the data pushed them there:
     a sign that they absorb something the model lacks)."""
     out = []
-    lo, hi = np.asarray(fitter.space.theta_lo), np.asarray(fitter.space.theta_hi)
+    lo, hi = np.asarray(fitter.space.theta.low), np.asarray(fitter.space.theta.high)
     for n, v, a, b in zip(PARAM_NAMES, fit.theta, lo, hi):
         if min(v - a, b - v) < frac * (b - a):
             out.append(n)
@@ -63,65 +63,62 @@ def _theta_dict(x) -> dict:
     return {n: float(v) for n, v in zip(PARAM_NAMES, x)}
 
 
+class Findings(NamedTuple):
+    """What `diagnose_mismatch` found and concluded, before it becomes a `DiagnosisResult` and a report
+    (fields as `DiagnosisResult`'s, and: `held_out_shown`, the held-out scores the report
+    shows; `terms_section`, the report's part on discovered terms; `search`, the forward
+    search; `separability`, the look-alike verdicts; `fitter`, `coarse`, the final and search
+    fitters)."""
+
+    base: DiscoveryFit
+    final: DiscoveryFit
+    ranked: list[Ranked]
+    test_before: MisspecificationTest
+    test_after: MisspecificationTest
+    localisation: Localisation
+    held_out: dict
+    held_out_shown: dict
+    predictions: dict
+    variances: dict
+    residual_stretches: dict
+    terms: TermDiscovery | None
+    test_terms: MisspecificationTest | None
+    conclusion: Verdict
+    terms_section: dict
+    search: Any
+    separability: list[dict]
+    fitter: Fitter
+    coarse: Fitter
+
+
 def build_report(
-    found: DiagnosisResult,
-    recording: Recording,
-    s: DiagnoseSettings,
-    names: tuple[str, ...],
-    chosen: tuple[str, ...],
-    search,
-    sep: list[dict],
-    fitter: Fitter,
-    coarse: Fitter,
+    recording: Recording, windows: Problem, s: DiagnoseSettings, f: Findings, seconds: float
 ) -> dict:
-    """report.json's content (without "seconds")."""
-    windows, base, final, ranked = found.windows, found.base, found.final, found.ranked
-    p_after = float(found.test_after.p_value)
-    detected = bool(found.test_before.p_value < s.alpha)
-    var = found.variances
-    fit_before = held_out_metrics(found.predictions["before"], windows, var.get("before"))
-    fit_after = held_out_metrics(found.predictions["after"], windows, var.get("after"))
-    chi_b = float(np.mean([v["chi2_dof"] for v in fit_before.values()]))
-    chi_a = float(np.mean([v["chi2_dof"] for v in fit_after.values()]))
-    held_improved = bool(chi_a < chi_b) if chosen else None
-    concl = verdict(detected, chosen, p_after, s.alpha, held_improved, worst_channel(fit_after))
-    held_terms = None
-    if "after_terms" in found.predictions:
-        held_terms = held_out_metrics(found.predictions["after_terms"], windows, var.get("after_terms"))
-    terms = terms_section(found, fit_after, held_terms, int(windows.held.sum()), s.alpha)
-    fits = {"before": fit_before, "after": fit_after}
-    if "fit" in terms:
-        fits["after_terms"] = terms.pop("fit")
-    text = concl["text"] + (f"; {terms['sentence']}" if terms.get("sentence") else "")
+    """report.json's content."""
+    chosen = f.conclusion.chosen
     return {
         "source": str(recording.source),
-        "mismatch_detected": detected,
-        "p_value": float(found.test_before.p_value),
+        "mismatch_detected": f.conclusion.detected,
+        "p_value": float(f.test_before.p_value),
         "alpha": s.alpha,
-        "p_value_after": p_after,
-        "located": _located(found.localisation, found.test_before, windows),
-        "effects": _effect_rows(ranked),
+        "p_value_after": float(f.test_after.p_value),
+        "located": _located(f.localisation, f.test_before, windows),
+        "effects": _effect_rows(f.ranked),
         "chosen": list(chosen),
-        "ranking_confidence": _confidence(ranked),
-        "separability": sep,
-        "pairs_fitted": [label(p) for p in search.pairs],
-        "pairs_skipped": _pairs_skipped(s, names, search.pairs),
-        "search_steps": describe(search.steps),
-        "ambiguous": _ambiguous(search.steps, chosen),
-        "fit": fits,
-        **terms,
+        "ranking_confidence": _confidence(f.ranked),
+        "separability": f.separability,
+        "pairs_fitted": [label(p) for p in f.search.pairs],
+        "pairs_skipped": _pairs_skipped(s, s.candidate_names(), f.search.pairs),
+        "search_steps": describe(f.search.steps),
+        "ambiguous": _ambiguous(f.search.steps, chosen),
+        "fit": f.held_out_shown,
+        **f.terms_section,
         # Validation: does the chosen fix also improve the held-out part (mean χ²/dof over
         # channels)? If not, the effect is absorbing some other mismatch on the fitted part.
-        "held_out_improved": held_improved,
-        "explained": concl["explained"],
-        "verdict": text,
-        "fit_train_chi2_dof": {"before": base.chi2_dof, "after": final.chi2_dof},
-        "theta": {"before": _theta_dict(base.theta), "after": _theta_dict(final.theta)},
-        "theta_std": {"before": _theta_dict(base.theta_std), "after": _theta_dict(final.theta_std)},
-        "v0": {"before": base.v0.tolist(), "after": final.v0.tolist()},
-        "at_bounds": _at_bounds(final, fitter),
-        "effect_params": final.effect_params,
-        "effect_params_std": final.effect_std,
+        "held_out_improved": f.conclusion.held_out_improved,
+        "explained": f.conclusion.explained,
+        "verdict": f.conclusion.text,
+        **_parameters(f.base, f.final, f.fitter),
         "noise": {
             "model": "additive white Gaussian per channel",
             "sigma": {c: float(x) for c, x in zip(windows.channels, windows.sigma)},
@@ -130,7 +127,21 @@ def build_report(
         "windows": _window_spans(windows, s.train_fraction),
         "channels": list(windows.channels),
         "recording_warnings": list(recording.warnings),
-        "method": _method(s, coarse, fitter),
+        "method": _method(s, f.coarse, f.fitter),
+        "seconds": seconds,
+    }
+
+
+def _parameters(base: DiscoveryFit, final: DiscoveryFit, fitter: Fitter) -> dict:
+    """The fits' θ, initial speeds and effect parameters, before and after the fix."""
+    return {
+        "fit_train_chi2_dof": {"before": base.chi2_dof, "after": final.chi2_dof},
+        "theta": {"before": _theta_dict(base.theta), "after": _theta_dict(final.theta)},
+        "theta_std": {"before": _theta_dict(base.theta_std), "after": _theta_dict(final.theta_std)},
+        "v0": {"before": base.v0.tolist(), "after": final.v0.tolist()},
+        "at_bounds": _at_bounds(final, fitter),
+        "effect_params": final.effect_params,
+        "effect_params_std": final.effect_std,
     }
 
 
@@ -356,7 +367,7 @@ def _md_footer(rep: dict) -> list[str]:
     return L
 
 
-def write_report(result, out: Path, plots: bool = True) -> None:
+def write_report(result: DiagnosisResult, out: Path, plots: bool = True) -> None:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rep = result.report

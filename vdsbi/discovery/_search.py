@@ -25,8 +25,8 @@ from typing import NamedTuple
 
 from ..simulator import release_compiled_programs
 from ._candidates import label
-from ._fit import FitResult
 from ._rank import STRONG, bic_score
+from ._results import DiscoveryFit
 
 
 class Step(NamedTuple):
@@ -42,7 +42,7 @@ class Step(NamedTuple):
 
 
 class ForwardSearch(NamedTuple):
-    fits: dict[tuple[str, ...], FitResult]  # every candidate fitted, () -> the base fit
+    fits: dict[tuple[str, ...], DiscoveryFit]  # every candidate fitted, () -> the base fit
     steps: list[Step]
     selected: tuple[str, ...]
 
@@ -72,15 +72,15 @@ def _step(current, names, fits, fit_fn) -> Step:
 
 
 def forward_search(
-    fit_fn: Callable[[tuple[str, ...], object], FitResult],
-    base: FitResult,
+    fit_fn: Callable[[tuple[str, ...], object], DiscoveryFit],
+    base: DiscoveryFit,
     names: Sequence[str],
     max_effects: int = 3,
 ) -> ForwardSearch:
     """Forward selection over `names` (see the module docstring).
 
     Args:
-        fit_fn: `(effects, z0) -> FitResult`, the fit of a candidate warm-started at z0.
+        fit_fn: `(effects, z0) -> DiscoveryFit`, the fit of a candidate warm-started at z0.
         base: the base model's fit ("none").
         names: the candidate effects.
         max_effects: most effects selected (1: singles only).
@@ -88,7 +88,7 @@ def forward_search(
     Returns:
         `ForwardSearch`: all fits, the steps taken, and the selected effects (possibly none).
     """
-    fits: dict[tuple[str, ...], FitResult] = {(): base}
+    fits: dict[tuple[str, ...], DiscoveryFit] = {(): base}
     steps: list[Step] = []
     current: tuple[str, ...] = ()
     # bounded: each step adds one effect and removes at most one

@@ -18,7 +18,6 @@ through the differentiable simulator:
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 
 import equinox as eqx
@@ -26,41 +25,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..simulator import CHANNELS, TERMS, Vehicle, term_effect, term_formula
+from ..simulator import TERMS, term_effect, term_formula
 from ._candidates import effect_space
-from ._fit import FitData, FitResult, Fitter, _whitened
+from ._fit import Fitter, _whitened
 from ._rank import HELD_OUT_CLAIM, STRONG, bic_score, worst_channel
+from ._results import DiscoveryFit, TermDiscovery
 
 TERM_EFFECT = "discovered_terms"
 
 
-@dataclasses.dataclass
-class TermDiscovery:
-    """The discovered terms (possibly none), their refit and where the search looked.
-
-    Attributes:
-        terms: one dict per kept term: key, formula, coefficient, std, unit, target,
-            linear_gain (evidence at selection), rms_change {channel: RMS change of the fit}.
-        fit: the refit with the chosen effects and the kept terms (None: no term kept).
-        fitter: the `Fitter` of that refit (for predictions).
-        effects: the effect names of the refit (the chosen ones and `TERM_EFFECT`).
-        screened: linearised evidence gain of every candidate term at the first step.
-        gain: log Bayes factor of the refit against the library fit (None: no refit).
-        dropped: library effects removed beside the terms (they were standing in for them).
-    """
-
-    terms: list[dict]
-    fit: FitResult | None
-    fitter: Fitter | None
-    effects: tuple[str, ...]
-    screened: dict[str, float]
-    gain: float | None
-    dropped: list[str] = dataclasses.field(default_factory=list)
-
-
 @eqx.filter_jit
-def _jacobian(model, space, data, z, active, free, solver):
-    fn = lambda y: _whitened(model, space, data, z.at[free].set(y), active, solver)
+def _jacobian(space, target, z, active, free):
+    fn = lambda y: _whitened(space, target, z.at[free].set(y), active)
     y0 = z[free]
     return fn(y0), jax.jacfwd(fn)(y0)
 
@@ -69,7 +45,7 @@ def _transfer(z_from: np.ndarray, src: Fitter, dst: Fitter, effects: Sequence[st
     """z in `dst`'s layout: θ, initial speeds and the `effects`' entries copied from `src`;
     everything else at its starting value."""
     z = dst.initial_z()
-    w = src.data.num_windows
+    w = src.num_windows
     z[: 6 + w] = z_from[: 6 + w]
     for e in effects:
         z[dst._effect_index(e)] = z_from[src._effect_index(e)]
@@ -112,27 +88,25 @@ def select_terms(r: np.ndarray, base_cols: np.ndarray, term_cols: np.ndarray, ke
     return out, screened
 
 
-def _rms_change(fitter: Fitter, fit: FitResult, effects, keys) -> dict:
+def _rms_change(fitter: Fitter, fit: DiscoveryFit, effects, keys) -> dict:
     """Per term: RMS change of every fitted channel when its coefficient is set to 0."""
-    data = fitter.data
+    problem = fitter.problem
     with_all = fitter.predict(fit.z, effects)
     idx = fitter._effect_index(TERM_EFFECT)
-    mask = np.asarray(data.mask) > 0
+    mask = problem.train
     out = {}
     for j, key in enumerate(keys):
         z = fit.z.copy()
         z[idx[j]] = 0.0  # the sigmoid's midpoint: c = 0 (symmetric bounds)
         diff = with_all - fitter.predict(z, effects)
         out[key] = {
-            ch: float(np.sqrt(np.mean(diff[:, :, CHANNELS.index(ch)][mask] ** 2))) for ch in data.channels
+            ch: float(np.sqrt(np.mean(diff[..., c][mask] ** 2))) for c, ch in enumerate(problem.channels)
         }
     return out
 
 
 def discover_terms(
-    vehicle: Vehicle,
-    data: FitData,
-    library_fit: FitResult,
+    library_fit: DiscoveryFit,
     library_fitter: Fitter,
     chosen: Sequence[str],
     *,
@@ -143,10 +117,8 @@ def discover_terms(
     """Describe the mismatch the library fit leaves by a few candidate terms (module docstring).
 
     Args:
-        vehicle: vehicle constants.
-        data: the fitted (training) windows.
-        library_fit: the fit of the chosen library effects (or the base fit), on `data`.
-        library_fitter: the `Fitter` that made it.
+        library_fit: the fit of the chosen library effects (or the base fit).
+        library_fitter: the `Fitter` that made it (its problem's training part is fitted).
         chosen: the library effects in that fit.
         max_terms: most terms kept.
         max_iter: LM iteration cap of the refit.
@@ -158,15 +130,13 @@ def discover_terms(
     chosen = tuple(chosen)
     keys = tuple(TERMS if candidates is None else candidates)
     effects = chosen + (TERM_EFFECT,)
-    dt = library_fitter.dt
-    screen = Fitter(vehicle, data, dt=dt, effects=effect_space(chosen, extra=(term_effect(keys),)))
+    problem, dt = library_fitter.problem, library_fitter.dt
+    screen = Fitter(problem, dt=dt, effects=effect_space(chosen, extra=(term_effect(keys),)))
     z0 = _transfer(library_fit.z, library_fitter, screen, chosen)
     base_free = screen.free_index(chosen)
     free = np.concatenate([base_free, screen._effect_index(TERM_EFFECT)])
     act = jnp.asarray(screen.active_mask(effects))
-    r, jac = _jacobian(
-        screen.model, screen.space, data, jnp.asarray(z0), act, jnp.asarray(free), screen.solver
-    )
+    r, jac = _jacobian(screen.space, screen.target, jnp.asarray(z0), act, jnp.asarray(free))
     r, jac = np.asarray(r), np.asarray(jac)
     nb = len(base_free)
     picked, screened = select_terms(r, jac[:, :nb], jac[:, nb:], keys, max_terms)
@@ -174,7 +144,7 @@ def discover_terms(
         return TermDiscovery([], None, None, effects, screened, None)
     sel = tuple(k for k, _ in picked)
     space = effect_space(chosen, extra=(term_effect(sel),))
-    fitter = Fitter(vehicle, data, dt=dt, effects=space, free_effects=space.num_params)
+    fitter = Fitter(problem, dt=dt, effects=space, free_effects=space.num_params)
     fit = fitter.fit(effects, _transfer(library_fit.z, library_fitter, fitter, chosen), max_iter=max_iter)
     gain = float(bic_score(fit, library_fit))
     if gain < STRONG:
@@ -182,11 +152,16 @@ def discover_terms(
     fit, dropped = _drop_stand_ins(fitter, fit, chosen, max_iter)
     effects = fit.effects
     gain = float(bic_score(fit, library_fit))
-    rms = _rms_change(fitter, fit, effects, sel)
-    terms = []
+    terms = _term_rows(fit, picked, _rms_change(fitter, fit, effects, sel))
+    return TermDiscovery(terms, fit, fitter, effects, screened, gain, dropped)
+
+
+def _term_rows(fit: DiscoveryFit, picked, rms: dict) -> list[dict]:
+    """One row per kept term: its formula, coefficient ± std, and what it changes."""
+    rows = []
     for key, lin_gain in picked:
         c = fit.effect_params[TERM_EFFECT][key]
-        terms.append(
+        rows.append(
             {
                 "key": key,
                 "formula": term_formula(key, c),
@@ -198,10 +173,10 @@ def discover_terms(
                 "rms_change": rms[key],
             }
         )
-    return TermDiscovery(terms, fit, fitter, effects, screened, gain, dropped)
+    return rows
 
 
-def _drop_stand_ins(fitter: Fitter, fit: FitResult, chosen, max_iter: int):
+def _drop_stand_ins(fitter: Fitter, fit: DiscoveryFit, chosen, max_iter: int):
     """Backward step beside the terms: a library effect that adds no strong evidence once the
     terms are in was standing in for them; it is dropped (same compiled kernel: inactive
     effects sit at their null values)."""
@@ -214,20 +189,32 @@ def _drop_stand_ins(fitter: Fitter, fit: FitResult, chosen, max_iter: int):
     return fit, dropped
 
 
-def terms_section(found, held_after: dict, held_terms: dict | None, n_held: int, alpha: float) -> dict:
+def terms_section(
+    *,
+    p_before: float,
+    p_after: float,
+    chosen: Sequence[str],
+    terms: TermDiscovery | None,
+    p_terms: float | None,
+    held_after: dict,
+    held_terms: dict | None,
+    n_held: int,
+    alpha: float,
+) -> dict:
     """The discovered terms, their held-out fit and test, and what explained the mismatch:
     "discovered term" (kept terms that also predict the held-out part better: held-out
     log-likelihood gain ½·Σ(χ²_library − χ²_terms) ≥ `STRONG`), "library" (the chosen effects
     leave p ≥ α/10 and a held-out χ²/dof ≤ `HELD_OUT_CLAIM` in every channel), "unexplained",
     or "none" (no mismatch).
 
-    `found` is the `DiagnosisResult`; `held_after`, `held_terms` the held-out metrics per
+    `p_before`, `p_after`, `p_terms`: the residual tests of the base fit, the chosen effects'
+    fit and the refit with the terms; `held_after`, `held_terms` the held-out scores per
     channel after the library fix and with the terms; `n_held` held-out samples per channel."""
-    detected = bool(found.test_before.p_value < alpha)
+    detected = bool(p_before < alpha)
     held_ok = worst_channel(held_after)[1] <= HELD_OUT_CLAIM
-    library = detected and bool(found.final.effects) and found.test_after.p_value >= alpha / 10 and held_ok
+    library = detected and bool(chosen) and p_after >= alpha / 10 and held_ok
     out: dict = {"discovered_terms": [], "p_value_after_terms": None, "terms_replace": []}
-    td = found.terms
+    td = terms
     if not detected:
         return {**out, "explanation": "none"}
     out["explanation"] = "library" if library else "unexplained"
@@ -239,7 +226,7 @@ def terms_section(found, held_after: dict, held_terms: dict | None, n_held: int,
             out["sentence"] = "no candidate term has strong evidence either: left unexplained"
         return out
     out["discovered_terms"], out["terms_replace"] = td.terms, list(td.dropped)
-    out["p_value_after_terms"] = float(found.test_terms.p_value)
+    out["p_value_after_terms"] = float(p_terms)
     out["fit"] = held_terms
     gain = 0.5 * n_held * sum(held_after[c]["chi2_dof"] - held_terms[c]["chi2_dof"] for c in held_terms)
     out["held_out_gain"] = float(gain)

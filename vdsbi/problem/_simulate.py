@@ -89,9 +89,17 @@ class WindowedModel(eqx.Module):
         return ys, jnp.all(ok) & jnp.all(jnp.isfinite(ys))
 
 
-def windowed_model(problem: Problem, effects: Sequence[str] = (), solver: Solver = Solver()) -> WindowedModel:
-    """The `WindowedModel` of a problem with the named effects enabled."""
-    model = make_model(problem.vehicle, effects, longitudinal=problem.longitudinal)
+def windowed_model(
+    problem: Problem,
+    effects: Sequence[str] = (),
+    solver: Solver = Solver(),
+    *,
+    model: VehicleModel | None = None,
+) -> WindowedModel:
+    """The `WindowedModel` of a problem with the named effects enabled, or around `model` (a
+    model built elsewhere, e.g. with unregistered effects; `effects` is then ignored)."""
+    if model is None:
+        model = make_model(problem.vehicle, effects, longitudinal=problem.longitudinal)
     return WindowedModel(
         model=model,
         inputs=problem.inputs(),
