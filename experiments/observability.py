@@ -39,13 +39,17 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 
 from vdsbi.diagnostics import (  # noqa: E402
+    Limits,
+    Maneuver,
+    check_limits,
+    design_maneuver,
+    design_problem,
     fisher_report,
     gauss_newton_fit,
     model_fisher,
     report_markdown,
     score_fisher_mc,
 )
-from vdsbi.diagnostics._design import Limits, Maneuver, check_limits, design, design_problem  # noqa: E402
 from vdsbi.diagnostics._fisher import scaled_mean_fn  # noqa: E402
 from vdsbi.simulator import (  # noqa: E402
     CHANNELS,
@@ -319,7 +323,9 @@ def main():
                 flush=True,
             )
 
-    res = design(problem, start, num_steps=steps, learning_rate=args.learning_rate, callback=progress)
+    res = design_maneuver(
+        problem, start, num_steps=steps, learning_rate=args.learning_rate, callback=progress
+    )
     t_design = time.perf_counter() - t0
     d_inputs = res.maneuver.inputs(limits)
     d_v0 = float(res.maneuver.initial_speed(limits))
