@@ -32,7 +32,7 @@ from ..problem import (
     split_parameters,
     validate,
 )
-from ..simulator import release_compiled_programs
+from ..simulator import SpeedDriven, model_class, release_compiled_programs
 from ._commands import diagnose_command
 from .outputs import (
     CHECKPOINT,
@@ -226,7 +226,7 @@ def default_effects(prob: Problem) -> tuple[str, ...]:
     used = grip_used(prob)
     if used is not None and used > 0.5:
         chosen.append(("tyre_friction", f"the drive uses {used:.0%} of the grip μ·g"))
-    if prob.longitudinal == "speed" and "yaw_rate" in prob.channels:
+    if issubclass(prob.model_class, SpeedDriven) and "yaw_rate" in prob.channels:
         chosen.append(("yaw_inertia", "a real car's yaw inertia is not m·l_f·l_r"))
         chosen.append(("signal_delay", "a real log's steer leads the motion it causes by its latency"))
     return tuple(chosen)
@@ -272,7 +272,7 @@ def _problem(recs, veh, longitudinal: str, segment, max_duration, bandwidth, hol
         raise InputError("settings", "--max-duration", "must be > 0")
     if not 0.0 <= holdout < 1.0:
         raise InputError("settings", "--holdout", f"must lie in [0, 1), got {holdout}")
-    speed = longitudinal_mode(recs[0], longitudinal) == "speed"
+    speed = issubclass(model_class(longitudinal_mode(recs[0], longitudinal)), SpeedDriven)
     window = max_duration if max_duration is not None else (10.0 if speed else 20.0)
     settings = ProblemSettings(
         longitudinal=longitudinal, max_window=window, segment=segment, bandwidth=bandwidth, held_out=holdout

@@ -10,7 +10,15 @@ import numpy as np
 
 from ..io import InputError, Recording
 from ..problem import longitudinal_mode, measured_longitudinal, smoothed_yaw_rate
-from ..simulator import CHANNELS, Inputs, Vehicle
+from ..simulator import (
+    CHANNELS,
+    AbstractVehicleModel,
+    Inputs,
+    SpeedDriven,
+    TorqueDriven,
+    Vehicle,
+    model_class,
+)
 from ._validate import PROFILE_V0, checked_theta, checked_v0, first_speed, load_vehicle
 
 
@@ -101,7 +109,7 @@ def simulate(
     veh, source = load_vehicle(vehicle)
     th = checked_theta(theta, veh)
     rec = inputs if isinstance(inputs, Recording) else None
-    mode = "torque" if rec is None else longitudinal_mode(rec, longitudinal)
+    mode = TorqueDriven if rec is None else model_class(longitudinal_mode(rec, longitudinal))
     inp = inputs if rec is None else _recording_inputs(rec, veh, mode)
     if v0 is None and rec is None:
         raise InputError("--v0", "v0", "give an initial speed for bare inputs")
@@ -140,10 +148,11 @@ def _result(given, inp: Inputs, ys, ok, theta, v0: float) -> SimulateResult:
     )
 
 
-def _recording_inputs(rec: Recording, vehicle: Vehicle, mode: str) -> Inputs:
-    """A recording's inputs in `mode`, the measured longitudinal motion as identify uses it."""
+def _recording_inputs(rec: Recording, vehicle: Vehicle, mode: type[AbstractVehicleModel]) -> Inputs:
+    """A recording's inputs for the model class `mode`, the measured longitudinal motion as
+    identify uses it."""
     inp = rec.inputs(longitudinal=mode, wheel_radius=vehicle.wheel_radius)
-    if mode != "speed":
+    if not issubclass(mode, SpeedDriven):
         return inp
     speed, accel = measured_longitudinal(rec, vehicle.wheel_radius)
     return Inputs(inp.t0, inp.dt, inp.steer, inp.torque_front, inp.torque_rear, speed=speed, accel=accel)

@@ -34,10 +34,11 @@ from ..simulator import (
     GRAVITY,
     NOMINAL_THETA,
     PARAM_NAMES,
+    RK4,
     SEED_CHANNELS,
+    AbstractSolver,
+    AbstractVehicleModel,
     Inputs,
-    Solver,
-    VehicleModel,
     solve,
 )
 from ._fisher import noise_model, scaled_fisher
@@ -222,7 +223,7 @@ class DesignProblem(eqx.Module):
         solver: integration settings used while optimising.
     """
 
-    model: VehicleModel
+    model: AbstractVehicleModel
     theta: Float[Array, "6"]
     limits: Limits
     channels: tuple[int, ...] = eqx.field(static=True)
@@ -232,7 +233,7 @@ class DesignProblem(eqx.Module):
     penalty_weight: float = eqx.field(static=True, default=1e3)
     margin: float = eqx.field(static=True, default=0.02)
     floor_fraction: float = eqx.field(static=True, default=0.1)
-    solver: Solver = Solver(dt=0.005)
+    solver: AbstractSolver = RK4(dt=0.005)
 
     @property
     def scale(self):
@@ -283,7 +284,7 @@ class DesignProblem(eqx.Module):
 
 
 def design_problem(
-    model: VehicleModel,
+    model: AbstractVehicleModel,
     theta,
     limits: Limits = Limits(),
     *,
@@ -291,7 +292,7 @@ def design_problem(
     channels=SEED_CHANNELS,
     noise: str = "seed",
     noise_std_map=None,
-    solver: Solver = Solver(dt=0.005),
+    solver: AbstractSolver = RK4(dt=0.005),
     penalty_weight: float = 1e3,
 ) -> DesignProblem:
     """Build a `DesignProblem`; `target=None` means D-optimal (log det F)."""
@@ -400,7 +401,12 @@ def _step(problem: DesignProblem, man: Maneuver, state, lr):
 
 
 def check_limits(
-    model: VehicleModel, theta, inputs: Inputs, v0: float, limits: Limits, solver: Solver = Solver()
+    model: AbstractVehicleModel,
+    theta,
+    inputs: Inputs,
+    v0: float,
+    limits: Limits,
+    solver: AbstractSolver = RK4(),
 ) -> dict:
     """Every limit checked on the simulated maneuver (default solver): values and verdicts."""
     ys, ok = solve(model, jnp.asarray(theta, dtype=float), inputs, jnp.asarray(v0, dtype=float), (), solver)

@@ -37,11 +37,12 @@ from ..simulator import (
     CHANNELS,
     NOMINAL_THETA,
     PARAM_NAMES,
+    RK4,
     SEED_CHANNELS,
     SEED_RELATIVE_NOISE,
+    AbstractSolver,
+    AbstractVehicleModel,
     Inputs,
-    Solver,
-    VehicleModel,
     solve,
 )
 
@@ -141,7 +142,7 @@ def score_fisher_mc(
 # --------------------------------------------------------------------------- vehicle model
 
 
-def param_names(model: VehicleModel) -> tuple[str, ...]:
+def param_names(model: AbstractVehicleModel) -> tuple[str, ...]:
     """θ names then `effect.param` for every enabled effect, in the flat-vector order."""
     names = list(PARAM_NAMES)
     for e in model.effects:
@@ -149,7 +150,7 @@ def param_names(model: VehicleModel) -> tuple[str, ...]:
     return tuple(names)
 
 
-def param_scale(model: VehicleModel, values: Float[Array, " P"]) -> np.ndarray:
+def param_scale(model: AbstractVehicleModel, values: Float[Array, " P"]) -> np.ndarray:
     """Scale of the flat parameter vector: Table I nominal for θ; for an effect parameter
     max(|value|, half its typical range), so a null (zero) value still has a unit."""
     scale = [NOMINAL_THETA[n] for n in PARAM_NAMES]
@@ -163,7 +164,7 @@ def param_scale(model: VehicleModel, values: Float[Array, " P"]) -> np.ndarray:
     return np.asarray(scale, dtype=float)
 
 
-def _split(model: VehicleModel, flat):
+def _split(model: AbstractVehicleModel, flat):
     theta = flat[: len(PARAM_NAMES)]
     out, i = [], len(PARAM_NAMES)
     for e in model.effects:
@@ -237,7 +238,7 @@ def _inv_psd(a):
 
 
 def model_fisher(
-    model: VehicleModel,
+    model: AbstractVehicleModel,
     theta: Float[Array, "6"],
     inputs: Inputs,
     v0: float,
@@ -247,7 +248,7 @@ def model_fisher(
     noise: str = "seed",
     noise_std: Mapping[str, float] | None = None,
     floor_fraction: float = FLOOR_FRACTION,
-    solver: Solver = Solver(),
+    solver: AbstractSolver = RK4(),
 ) -> Fisher:
     """Fisher information of θ and the enabled effects' parameters for one maneuver.
 
@@ -295,7 +296,7 @@ def model_fisher(
     )
 
 
-def scaled_mean_fn(model, scale, inputs, v0, idx, solver=Solver()):
+def scaled_mean_fn(model, scale, inputs, v0, idx, solver=RK4()):
     """z ↦ noise-free readings (T, C) of the channels `idx`, with θ = z·scale."""
 
     def mean(z):
@@ -325,7 +326,7 @@ class ScaledFisher(NamedTuple):
 
 
 def scaled_fisher(
-    model: VehicleModel,
+    model: AbstractVehicleModel,
     z: Float[Array, " P"],
     scale: Float[Array, " P"],
     inputs: Inputs,
@@ -334,7 +335,7 @@ def scaled_fisher(
     relative: Float[Array, " C"],
     additive: Float[Array, " C"],
     floor_fraction: float = FLOOR_FRACTION,
-    solver: Solver = Solver(),
+    solver: AbstractSolver = RK4(),
 ) -> ScaledFisher:
     """F of the flat parameters (θ, then the model's effects') in scaled units, from one
     forward-mode pass through `solve`: the Fisher assembly behind `model_fisher` and the

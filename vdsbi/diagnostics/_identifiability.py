@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..problem import Problem, dof_factor, windowed_model
-from ..simulator import PARAM_NAMES, Solver
+from ..simulator import PARAM_NAMES, RK4, AbstractSolver
 from ._fisher import fisher_from_jacobian
 
 #: Posterior std over prior std above which a parameter is reported as not identified.
@@ -63,7 +63,7 @@ def identifiability(
     *,
     effects: Sequence[str] = (),
     effect_params: tuple = (),
-    solver: Solver = Solver(),
+    solver: AbstractSolver = RK4(),
 ) -> dict[str, dict]:
     """Per parameter: prior std, Laplace posterior std at θ, their ratio, and a verdict.
 

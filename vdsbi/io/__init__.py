@@ -26,7 +26,6 @@ from ._files import (
 from ._parquet import read_parquet as read_parquet
 from ._recording import (
     LIMITS as LIMITS,
-    LONGITUDINAL_MODES as LONGITUDINAL_MODES,
     Recording as Recording,
     build_recording as build_recording,
     kinematic_slopes as kinematic_slopes,

@@ -10,7 +10,7 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 import pandas as pd
 
-from ..simulator import CHANNELS, INPUTS
+from ..simulator import CHANNELS, INPUTS, SpeedDriven, TorqueDriven, model_class
 from ._errors import InputError
 from ._resample import check_uniform, resample, running_mean
 
@@ -21,8 +21,6 @@ TORQUES: tuple[str, ...] = tuple(c for c in INPUTS if c != "steer")
 #: Channels a speed follows from (`vx`, else the wheel speeds × radius): one is required
 #: without torques, since the longitudinal motion then follows the measured speed.
 SPEED_CHANNELS: tuple[str, ...] = ("vx", "omega_front", "omega_rear")
-#: How the longitudinal motion is driven: by the applied wheel torques, or by the measured speed.
-LONGITUDINAL_MODES: tuple[str, ...] = ("torque", "speed")
 #: Window, s, of the local quadratic fit whose slope is the acceleration when `ax` is absent.
 ACCEL_WINDOW = 0.2
 MIN_MEASURED = 2
@@ -118,12 +116,13 @@ class Recording:
             raise KeyError(f"{self.source}: channel(s) {missing} not in recording {self.channel_names}")
         return np.stack([self.channels[n] for n in names], axis=-1)
 
-    def inputs(self, *, longitudinal: str | None = None, wheel_radius: float | None = None):
+    def inputs(self, *, longitudinal: str | type | None = None, wheel_radius: float | None = None):
         """The driver inputs as a `vdsbi.simulator.Inputs` on this grid.
 
         Args:
-            longitudinal: "torque" (the wheels are driven by the recorded torques) or "speed"
-                (the longitudinal motion follows the measured speed); default "torque" if the
+            longitudinal: the model class or its mode's name: "torque" (`TorqueDriven`, the
+                wheels are driven by the recorded torques) or "speed" (`SpeedDriven`, the
+                longitudinal motion follows the measured speed); default "torque" if the
                 recording has torques, else "speed".
             wheel_radius: m, turns wheel speeds into a speed in "speed" mode when `vx` is absent.
 
@@ -139,24 +138,22 @@ class Recording:
         """
         from ..simulator import Inputs
 
-        mode = self._longitudinal(longitudinal)
-        if mode == "torque":
+        if issubclass(self._longitudinal(longitudinal), TorqueDriven):
             return Inputs(self.t[0], self.dt, self.steer, self.torque_front, self.torque_rear)
         return Inputs(**_speed_inputs(self, wheel_radius))
 
-    def _longitudinal(self, longitudinal: str | None) -> str:
+    def _longitudinal(self, longitudinal: str | type | None) -> type:
         if longitudinal is None:
-            return "torque" if self.has_torques else "speed"
-        if longitudinal not in LONGITUDINAL_MODES:
-            raise ValueError(f"longitudinal must be one of {list(LONGITUDINAL_MODES)}, got {longitudinal!r}")
-        if longitudinal == "torque" and not self.has_torques:
+            return TorqueDriven if self.has_torques else SpeedDriven
+        cls = model_class(longitudinal)
+        if issubclass(cls, TorqueDriven) and not self.has_torques:
             raise InputError(
                 self.source,
                 "torque_front",
                 "no torque columns, so the wheels cannot be driven by torques; expected torque_front "
                 "and torque_rear, or the speed-driven mode (longitudinal='speed')",
             )
-        return longitudinal
+        return cls
 
     def speed(self, wheel_radius: float | None = None) -> np.ndarray | None:
         """(T,) forward speed, m/s: `vx` if present, else mean wheel speed × `wheel_radius`."""

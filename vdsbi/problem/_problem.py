@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..io import InputError, Recording
-from ..simulator import CHANNELS, GRAVITY, Decimator, Inputs, Vehicle
+from ..simulator import CHANNELS, GRAVITY, LONGITUDINAL_MODES, Decimator, Inputs, Vehicle, model_class
 from ._limit import slides
 from ._measured import (
     TORQUE_SPEED_TOLERANCE,
@@ -27,7 +27,6 @@ from ._measured import (
 from ._noise import raw_noise_std
 from ._windows import Window, choose_windows
 
-LONGITUDINAL_MODES = ("torque", "speed")
 #: Channels that are inputs, not evidence, when the longitudinal motion follows the measured
 #: speed: vx is the speed itself, ax loads the tyres, and the wheel speeds are vx/R_eff.
 SPEED_MODE_INPUT_CHANNELS = ("ax", "vx", "omega_front", "omega_rear")
@@ -148,6 +147,11 @@ class Problem:
     @property
     def channel_index(self) -> tuple[int, ...]:
         return tuple(CHANNELS.index(c) for c in self.channels)
+
+    @property
+    def model_class(self) -> type:
+        """`TorqueDriven` or `SpeedDriven`: the simulator model `longitudinal` names."""
+        return model_class(self.longitudinal)
 
     def part(self, name: str) -> np.ndarray:
         """The (W, K) mask of "train", "held" or "valid" samples."""

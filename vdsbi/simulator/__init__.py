@@ -2,8 +2,10 @@
 
 from ._dynamics import (
     LONGITUDINAL_MODES as LONGITUDINAL_MODES,
-    Args as Args,
+    SpeedDriven as SpeedDriven,
+    TorqueDriven as TorqueDriven,
     VehicleModel as VehicleModel,
+    model_class as model_class,
     steady_lateral_state as steady_lateral_state,
 )
 from ._effects import (
@@ -19,6 +21,7 @@ from ._effects import (
 )
 from ._filter import Decimator as Decimator
 from ._inputs import Inputs as Inputs
+from ._model import AbstractVehicleModel as AbstractVehicleModel, Args as Args
 from ._profiles import (
     constant_profile as constant_profile,
     random_profile as random_profile,
@@ -37,7 +40,6 @@ from ._sensors import (
 from ._sharding import shard_draws as shard_draws
 from ._solve import (
     TRACE_COUNT as TRACE_COUNT,
-    Solver as Solver,
     check_inputs as check_inputs,
     check_theta as check_theta,
     effect_params_from as effect_params_from,
@@ -47,8 +49,13 @@ from ._solve import (
     solve_batch as solve_batch,
     theta_valid as theta_valid,
 )
+from ._solver import (
+    RK4 as RK4,
+    AbstractSolver as AbstractSolver,
+    AdaptiveTsit5 as AdaptiveTsit5,
+    Solver as Solver,
+)
 from ._stochastic import StochasticSimulator as StochasticSimulator
-from ._tire import dugoff as dugoff
 from ._vehicle import (
     CHANNELS as CHANNELS,
     GRAVITY as GRAVITY,

@@ -18,9 +18,9 @@ class Inputs(eqx.Module):
         torque_front: total front-axle wheel torque, N·m (> 0 drives), shape (T,).
         torque_rear: total rear-axle wheel torque, N·m, shape (T,).
         speed: measured longitudinal speed Vx, m/s, shape (T,), or None. Required by
-            `VehicleModel(longitudinal="speed")`, ignored in torque mode.
+            `SpeedDriven`, ignored by `TorqueDriven`.
         accel: measured longitudinal specific force a_x (IMU ax), m/s², shape (T,), or None.
-            Required in speed mode (it sets the load transfer), ignored in torque mode.
+            Required by `SpeedDriven` (it sets the load transfer), ignored by `TorqueDriven`.
 
     `speed` and `accel` are None-able pytree leaves: windows stacked with `jax.tree.map`
     and vmapped keep None where every window has None.

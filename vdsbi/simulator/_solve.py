@@ -1,49 +1,22 @@
-"""Solving the model with diffrax: one draw, and many draws vmapped and sharded."""
+"""Solving the model: one draw, and many draws vmapped and sharded."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
 
-import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from ._dynamics import LONGITUDINAL_MODES, Args, VehicleModel
+from ._dynamics import AbstractVehicleModel, Args, SpeedDriven, model_class
 from ._effects import EFFECTS, get_effect
 from ._inputs import Inputs
 from ._sharding import shard_draws
+from ._solver import RK4, AbstractSolver
 from ._vehicle import PARAM_NAMES, Vehicle
-
-
-class Solver(eqx.Module):
-    """How to integrate.
-
-    Default: fixed-step RK4 at 2.5 ms (two steps per 200 Hz sample), stepped with
-    `lax.scan`, so a batch has a static cost and readings land exactly on the samples.
-    One step per sample (5 ms) is stable and 4th-order accurate too, but its ax error at
-    torque steps (≈ 0.025 m/s² in float32) exceeds a tenth of the seed's sensor noise;
-    2.5 ms brings it to ≈ 0.002 m/s² for twice the cost.
-    The wheel/slip-relaxation pair is a lightly damped oscillator with
-    ω_n² ≈ C_κ·R_eff²/(I_w·σ_l) (≈ 170 rad/s for the default car, 270 rad/s at the prior's
-    stiffest tires): |λ|·h ≤ 1.4 at h = 5 ms, inside RK4's stability region (2.8 on the
-    imaginary axis), so no implicit solver is needed. `dt=None` switches to adaptive Tsit5
-    through `diffrax.diffeqsolve` with rtol/atol (the reference path).
-
-    Attributes:
-        dt: fixed step, s, rounded to an integer fraction of the sample interval;
-            None for adaptive.
-        rtol, atol: tolerances when adaptive.
-        max_steps: bound on the number of adaptive steps (failure is flagged, not raised).
-    """
-
-    dt: float | None = eqx.field(static=True, default=0.0025)
-    rtol: float = eqx.field(static=True, default=1e-6)
-    atol: float = eqx.field(static=True, default=1e-8)
-    max_steps: int = eqx.field(static=True, default=100_000)
 
 
 def effect_params_from(
@@ -97,54 +70,50 @@ def theta_valid(theta, vehicle: Vehicle) -> Bool[Array, ""]:
     return (theta[0] > 0) & (theta[0] < vehicle.wheelbase) & jnp.all(theta[1:] > 0)
 
 
-def check_inputs(inputs: Inputs, longitudinal: str = "torque") -> None:
-    """Raise ValueError naming the series if an input the mode uses is missing or non-finite.
+def check_inputs(inputs: Inputs, longitudinal: str | type[AbstractVehicleModel] = "torque") -> None:
+    """Raise ValueError naming the series if an input the model uses is missing or non-finite.
 
     Args:
         inputs: driver inputs.
-        longitudinal: the model's mode; "speed" also needs `inputs.speed` and `inputs.accel`.
+        longitudinal: the model class or its mode's name; `SpeedDriven` ("speed") also needs
+            `inputs.speed` and `inputs.accel`.
     """
-    if longitudinal not in LONGITUDINAL_MODES:
-        raise ValueError(f"longitudinal: must be one of {LONGITUDINAL_MODES}, got {longitudinal!r}")
-    names = ["steer", "torque_front", "torque_rear"]
-    if longitudinal == "speed":
-        _require_measured(longitudinal, inputs)
-        names += ["speed", "accel"]
-    for name in names:
+    cls = model_class(longitudinal)
+    _require_measured(cls, inputs)
+    for name in ("steer", "torque_front", "torque_rear", *cls.measured_inputs):
         arr = np.asarray(getattr(inputs, name))
         if not np.all(np.isfinite(arr)):
             idx = int(np.argmin(np.isfinite(arr)))
             raise ValueError(f"inputs: '{name}' is not finite at sample {idx}")
 
 
-def _require_measured(longitudinal: str, inputs: Inputs) -> None:
-    if longitudinal == "speed":
-        missing = [n for n in ("speed", "accel") if getattr(inputs, n) is None]
-        if missing:
-            raise ValueError(
-                f"inputs: longitudinal='speed' needs the measured series {missing} "
-                "(Inputs(..., speed=vx m/s, accel=ax m/s²))"
-            )
+def _require_measured(cls: type[AbstractVehicleModel], inputs: Inputs) -> None:
+    missing = [n for n in cls.measured_inputs if getattr(inputs, n) is None]
+    if missing:
+        raise ValueError(
+            f"inputs: longitudinal={cls.longitudinal!r} needs the measured series {missing} "
+            "(Inputs(..., speed=vx m/s, accel=ax m/s²))"
+        )
 
 
 def solve(
-    model: VehicleModel,
+    model: AbstractVehicleModel,
     theta: Float[Array, "6"],
     inputs: Inputs,
     v0: Float[Array, ""],
     effect_params: tuple = (),
-    solver: Solver = Solver(),
+    solver: AbstractSolver = RK4(),
     lateral0: Float[Array, "2"] | None = None,
 ) -> tuple[Float[Array, "T 6"], Bool[Array, ""]]:
     """Noise-free sensor readings at the input samples, and a success flag (one draw).
 
     Args:
-        model: vehicle model (its `longitudinal` mode decides what drives Vx).
+        model: vehicle model (`TorqueDriven` or `SpeedDriven`: what drives Vx).
         theta: (6,) identified parameters.
-        inputs: driver inputs; speed mode needs `speed` and `accel`.
-        v0: initial speed, m/s (ignored in speed mode: the measured speed at t0).
+        inputs: driver inputs; `SpeedDriven` needs `speed` and `accel`.
+        v0: initial speed, m/s (ignored by `SpeedDriven`: the measured speed at t0).
         effect_params: one parameter vector per enabled effect.
-        solver: integration settings.
+        solver: the integrator.
         lateral0: optional (2,) initial (Vy m/s, r rad/s); None starts straight (Vy = r = 0).
 
     Returns:
@@ -152,58 +121,12 @@ def solve(
         ok: False if the solve failed, θ is unphysical or any value is non-finite.
 
     Raises:
-        ValueError: (at trace time) speed mode without `inputs.speed`/`inputs.accel`.
+        ValueError: (at trace time) `SpeedDriven` without `inputs.speed`/`inputs.accel`.
     """
-    _require_measured(model.longitudinal, inputs)
+    _require_measured(type(model), inputs)
     args = Args(theta=theta, effect_params=effect_params, inputs=inputs)
     y0 = model.initial_state(theta, effect_params, inputs, v0, lateral0)
-    term = diffrax.ODETerm(model.vector_field)
-    if solver.dt is None:
-        sol = diffrax.diffeqsolve(
-            term,
-            diffrax.Tsit5(),
-            inputs.t0,
-            inputs.ts[-1],
-            None,
-            y0,
-            args=args,
-            saveat=diffrax.SaveAt(ts=inputs.ts, fn=model.sensors),
-            # Steps land on the samples: the linearly interpolated inputs kink there.
-            stepsize_controller=diffrax.ClipStepSizeController(
-                diffrax.PIDController(rtol=solver.rtol, atol=solver.atol), step_ts=inputs.ts
-            ),
-            max_steps=solver.max_steps,
-            throw=False,
-        )
-        ys, solved = sol.ys, sol.result == diffrax.RESULTS.successful
-    else:
-        substeps = max(1, round(inputs.dt / solver.dt))
-        h = inputs.dt / substeps
-        f = lambda t, y: model.vector_field(t, y, args)
-
-        def rk4_step(t0, y, k1):
-            # Classical RK4 written out in plain jnp rather than as a diffrax tableau: the four
-            # unrolled stages fuse better than diffrax's stage loop (~1/3 less CPU per batched
-            # step), and plain jnp supports both autodiff modes (jax.jacfwd and jax.grad).
-            k2 = f(t0 + 0.5 * h, y + (0.5 * h) * k1)
-            k3 = f(t0 + 0.5 * h, y + (0.5 * h) * k2)
-            k4 = f(t0 + h, y + h * k3)
-            return y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-
-        def sample_interval(y, k):
-            t_k = inputs.t0 + k * inputs.dt
-            # One evaluation gives both the readings at sample k and the first RK4 stage.
-            k1, reading = model.evaluate(t_k, y, args)
-            y = rk4_step(t_k, y, k1)
-            if substeps > 1:  # rolled: as fast as unrolled, and compile time stays flat
-                step = lambda j, y: rk4_step(t_k + j * h, y, f(t_k + j * h, y))
-                y = jax.lax.fori_loop(1, substeps, step, y)
-            return y, reading
-
-        y_end, ys = jax.lax.scan(sample_interval, y0, jnp.arange(inputs.num_samples - 1))
-        t_end = inputs.t0 + (inputs.num_samples - 1) * inputs.dt
-        ys = jnp.concatenate([ys, model.sensors(t_end, y_end, args)[None]])
-        solved = jnp.asarray(True)
+    ys, solved = solver.integrate(model, y0, args)
     ok = (
         solved
         & jnp.all(jnp.isfinite(ys))
@@ -226,12 +149,12 @@ def _solve_batch(model, theta, inputs, v0, effect_params, solver, lateral0=None)
 
 
 def solve_batch(
-    model: VehicleModel,
+    model: AbstractVehicleModel,
     theta: Float[Array, "N 6"],
     inputs: Inputs,
     v0: Float[Array, " N"],
     effect_params: tuple = (),
-    solver: Solver = Solver(),
+    solver: AbstractSolver = RK4(),
     lateral0: Float[Array, "N 2"] | None = None,
 ) -> tuple[Float[Array, "N T 6"], Bool[Array, " N"]]:
     """Many draws at once: vmapped over draws and sharded over all jax.devices() along N.
@@ -240,7 +163,7 @@ def solve_batch(
     initial (Vy m/s, r rad/s) per draw, (N, 2) or broadcastable to it (e.g. (2,)). A failed
     draw is flagged in the returned mask; it never raises and never spoils the others.
     """
-    _require_measured(model.longitudinal, inputs)
+    _require_measured(type(model), inputs)
     theta = jnp.asarray(theta)
     n = theta.shape[0]
     v0 = jnp.broadcast_to(jnp.asarray(v0, dtype=theta.dtype), (n,))
@@ -255,20 +178,24 @@ def solve_batch(
     return ys[:n], ok[:n]
 
 
-def make_model(vehicle: Vehicle, effects: Sequence[str] = (), longitudinal: str = "torque") -> VehicleModel:
+def make_model(
+    vehicle: Vehicle,
+    effects: Sequence[str] = (),
+    longitudinal: str | type[AbstractVehicleModel] = "torque",
+) -> AbstractVehicleModel:
     """Model with the named effects enabled.
 
     Args:
         vehicle: vehicle constants.
         effects: names of effects, applied in this order.
-        longitudinal: "torque" (wheels driven by the applied torques) or "speed" (Vx follows
-            the measured speed; the inputs must then carry `speed` and `accel`).
+        longitudinal: the model class, or its mode's name: "torque" (`TorqueDriven`, wheels
+            driven by the applied torques) or "speed" (`SpeedDriven`, Vx follows the measured
+            speed; the inputs must then carry `speed` and `accel`).
 
     Raises:
         ValueError: unknown or duplicate effect names, unknown mode.
     """
-    if longitudinal not in LONGITUDINAL_MODES:
-        raise ValueError(f"longitudinal: must be one of {LONGITUDINAL_MODES}, got {longitudinal!r}")
+    cls = model_class(longitudinal)
     if isinstance(effects, str):
         effects = (effects,)
     for name in effects:
@@ -276,9 +203,7 @@ def make_model(vehicle: Vehicle, effects: Sequence[str] = (), longitudinal: str 
             get_effect(name)  # raises the clear error
     if len(set(effects)) != len(effects):
         raise ValueError(f"effects: duplicate effect names in {list(effects)}")
-    return VehicleModel(
-        vehicle=vehicle, effects=tuple(get_effect(n) for n in effects), longitudinal=longitudinal
-    )
+    return cls(vehicle=vehicle, effects=tuple(get_effect(n) for n in effects))
 
 
 def simulate(
@@ -289,8 +214,8 @@ def simulate(
     v0: float | None = None,
     effects: Sequence[str] = (),
     effect_params: Mapping[str, object] | None = None,
-    solver: Solver = Solver(),
-    longitudinal: str = "torque",
+    solver: AbstractSolver = RK4(),
+    longitudinal: str | type[AbstractVehicleModel] = "torque",
     lateral0=None,
 ) -> tuple[np.ndarray, bool]:
     """One noise-free simulation with every input checked first (the user-facing call).
@@ -299,12 +224,12 @@ def simulate(
         theta: (6,) in PARAM_NAMES order.
         inputs: driver inputs.
         vehicle: vehicle constants.
-        v0: initial speed, m/s (required in torque mode; ignored in speed mode).
+        v0: initial speed, m/s (required by `TorqueDriven`; ignored by `SpeedDriven`).
         effects: names of effects to enable.
         effect_params: {effect: {param: value}}; missing parameters take null values.
-        solver: integration settings.
-        longitudinal: "torque" or "speed" (see `VehicleModel`); speed mode needs
-            `inputs.speed` and `inputs.accel`.
+        solver: the integrator.
+        longitudinal: the model class or its mode's name, "torque" or "speed" (see
+            `make_model`); `SpeedDriven` needs `inputs.speed` and `inputs.accel`.
         lateral0: optional initial (Vy m/s, r rad/s); default starts straight.
 
     Returns:
@@ -314,8 +239,9 @@ def simulate(
         ValueError: naming the offending field.
     """
     check_theta(theta, vehicle)
-    check_inputs(inputs, longitudinal)
-    if longitudinal == "speed":
+    cls = model_class(longitudinal)
+    check_inputs(inputs, cls)
+    if issubclass(cls, SpeedDriven):
         v0 = 0.0  # unused: the measured speed at t0 sets the initial state
     elif not (isinstance(v0, (int, float)) and math.isfinite(v0) and v0 > 0):
         raise ValueError(f"v0: initial speed must be a positive number, got {v0!r}")
@@ -324,7 +250,7 @@ def simulate(
         if lateral0.shape != (2,) or not np.all(np.isfinite(lateral0)):
             raise ValueError(f"lateral0: expected 2 finite values (Vy m/s, r rad/s), got {lateral0!r}")
         lateral0 = jnp.asarray(lateral0, dtype=float)
-    model = make_model(vehicle, effects, longitudinal)
+    model = make_model(vehicle, effects, cls)
     _, params = effect_params_from(effects, effect_params)
     ys, ok = _solve_one(
         model, jnp.asarray(theta, dtype=float), inputs, jnp.asarray(v0), params, solver, lateral0

@@ -7,11 +7,12 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, PRNGKeyArray
 
-from ._dynamics import VehicleModel
 from ._filter import Decimator
 from ._inputs import Inputs
+from ._model import AbstractVehicleModel
 from ._sensors import SensorNoise, StiffnessMixtureNoise
-from ._solve import Solver, solve_batch
+from ._solve import solve_batch
+from ._solver import RK4, AbstractSolver
 from ._vehicle import CHANNELS
 
 
@@ -25,24 +26,23 @@ class StochasticSimulator(eqx.Module):
         v0_range: initial speed drawn uniformly from [low, high] m/s (seed: [10, 11]).
         sensor_noise: noise added to the readings.
         process_noise: optional stiffness perturbation (the seed's mixture).
-        solver: integration settings.
+        solver: the integrator.
         decimator: optional anti-alias filter and decimation, applied after the sensor noise
             so that the simulated noise is filtered exactly as the measurement's; the output
             then has `decimator.num_out(T)` samples.
         lateral0: optional initial (Vy m/s, r rad/s), (2,) for all draws or (N, 2) per draw;
             None starts straight. A call's `lateral0` argument overrides it.
 
-    In speed mode (`model.longitudinal == "speed"`) the drawn v0 is unused: Vx follows
-    `inputs.speed`.
+    With a `SpeedDriven` model the drawn v0 is unused: Vx follows `inputs.speed`.
     """
 
-    model: VehicleModel
+    model: AbstractVehicleModel
     inputs: Inputs
     channels: tuple[str, ...] = eqx.field(static=True)
     v0_range: tuple[float, float] = eqx.field(static=True)
     sensor_noise: SensorNoise
     process_noise: StiffnessMixtureNoise | None = None
-    solver: Solver = Solver()
+    solver: AbstractSolver = RK4()
     decimator: Decimator | None = None
     lateral0: Float[Array, "*N 2"] | None = None
 

@@ -10,22 +10,6 @@ from ._fastmath import tan
 Scalar = Float[Array, ""]
 
 
-def dugoff(
-    c_kappa: Scalar, c_alpha: Scalar, kappa: Scalar, alpha: Scalar, fz: Scalar, mu: Scalar
-) -> tuple[Scalar, Scalar]:
-    """Longitudinal and lateral axle force, N.
-
-    Args:
-        c_kappa: longitudinal slip stiffness, N.
-        c_alpha: cornering stiffness, N/rad.
-        kappa: longitudinal slip (relaxed), –.
-        alpha: slip angle (relaxed), rad.
-        fz: vertical axle load, N.
-        mu: friction coefficient.
-    """
-    return dugoff_with_load(dugoff_demand(c_kappa, c_alpha, kappa, alpha), fz, mu)
-
-
 def dugoff_demand(c_kappa: Scalar, c_alpha: Scalar, kappa: Scalar, alpha: Scalar) -> tuple:
     """The load-independent part of Dugoff: linear forces and the friction demand.
 
