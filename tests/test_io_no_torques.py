@@ -281,16 +281,16 @@ def drive(torque: np.ndarray | None, rate: float = 200.0):
     return build_recording(cols, "synthetic")
 
 
-def test_segments_without_torques_judge_the_steering_alone():
+def test_segments_without_torques_judge_the_lateral_dynamics_alone():
     pulsed = lambda t: np.where(t >= 25, 300.0 * np.sin(3 * t), 200.0)  # noqa: E731
     with_torque = find_segments(drive(pulsed))
     without = find_segments(drive(None))
-    # Throttle pulses excite 25–40 s with torques; without, that stretch is steady steer.
+    # Throttle pulses excite 25–40 s with torques; without, that stretch is straight driving.
     assert [(s.usable) for s in with_torque] == [False, True]
     assert with_torque[1].t1 == 40.0 and with_torque[1].t0 == pytest.approx(without[1].t0)
     assert [s.usable for s in without] == [False, True, False]
-    assert without[2].reason == "no excitation (steady steer)"
+    assert without[2].reason.startswith("straight: |ay| rms 0.0")
     assert 24.0 < without[1].t1 <= 26.0
     steady = find_segments(drive(lambda t: np.full_like(t, 200.0)))
-    assert steady[2].reason == "no excitation (steady steer and torque)"
+    assert steady[2].reason.startswith("straight: ") and "torque std up to 0 N·m" in steady[2].reason
     assert usable_segments(drive(None)) == [(s.t0, s.t1) for s in steady if s.usable]

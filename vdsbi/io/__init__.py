@@ -37,6 +37,9 @@ from ._segments import (
     estimate_noise_std as estimate_noise_std,
     find_segments as find_segments,
     label_runs as label_runs,
+    lateral_level as lateral_level,
+    lateral_time_constant as lateral_time_constant,
+    min_window as min_window,
     usable_segments as usable_segments,
 )
 from ._speed import (

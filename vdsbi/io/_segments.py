@@ -3,15 +3,20 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
 
+from ..simulator import GRAVITY
 from ._recording import Recording
 from ._speed import forward_speed
 
 #: Wheel radius, m, used to turn wheel speeds into a speed when neither vx nor a radius is given.
 FALLBACK_WHEEL_RADIUS = 0.31
+
+# Sample labels, in `find_segments`; EXCLUDED + k is the k-th excluded stretch.
+USABLE, SLOW, QUIET, EXCLUDED = 0, 1, 2, 3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,69 +46,190 @@ def label_runs(labels: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(starts.tolist(), stops.tolist()))
 
 
+#: Lateral specific force below which a stretch counts as straight, m/s²: 0.03 g, the ay of a
+#: 3 % road crossfall or of a 1 mrad road-wheel angle offset at 25 m/s; below it the lateral
+#: signal cannot be told from the road's and the sensors' offsets.
+LATERAL_FLOOR = 0.03 * GRAVITY
+#: ... and it must stand this many noise stds (of the 0.5 s mean) above the noise.
+NOISE_MULTIPLE = 3.0
+#: Axle cornering stiffness per axle load, /rad, for the lateral time constant: the geometric
+#: centre of the prior box's 3–30 /rad (`Vehicle.default_prior`).
+CORNERING_PER_LOAD = float(np.sqrt(3.0 * 30.0))
+#: A window fits at least this many lateral time constants after its burn-in ...
+SETTLE = 5.0
+#: ... and at least this long, s (a few dozen compared samples through the 5 Hz filter).
+MIN_FITTED = 1.0
+#: Smoothing of the lateral level and of the speed, s.
+LEVEL_WINDOW = 0.5
+
+
+def lateral_time_constant(speed: float) -> float:
+    """Time constant, s, of the single-track model's side-slip mode at `speed` m/s:
+    m·v / (C_αf + C_αr) with each axle's cornering stiffness `CORNERING_PER_LOAD` times its
+    load m·g/2 (the mass cancels)."""
+    return abs(speed) / (CORNERING_PER_LOAD * GRAVITY)
+
+
+def min_window(speed: float, burn_in: float) -> float:
+    """Shortest window, s, worth simulating at `speed` m/s: the burn-in, then `SETTLE` lateral
+    time constants (at least `MIN_FITTED` s) of fitted samples."""
+    return burn_in + max(SETTLE * lateral_time_constant(speed), MIN_FITTED)
+
+
+def lateral_level(rec: Recording, speed: np.ndarray) -> tuple[np.ndarray, np.ndarray, str] | None:
+    """(T,) lateral level, m/s², with (T,) the noise std of that level, and its name: |v_x·r|
+    from the yaw rate if measured (a gyro sees neither road bank nor body roll), else |a_y|,
+    each a centred `LEVEL_WINDOW` mean. None without either channel."""
+    n = max(1, int(round(LEVEL_WINDOW * rec.rate)))
+    noise = estimate_noise_std(rec)
+    if "yaw_rate" in rec.channels:
+        level = np.abs(_rolling(rec.channels["yaw_rate"] * speed, n, "mean"))
+        return level, noise["yaw_rate"] * np.abs(speed) / np.sqrt(n), "|v·r|"
+    if "ay" in rec.channels:
+        level = np.abs(_rolling(rec.channels["ay"], n, "mean"))
+        return level, np.full_like(level, noise["ay"] / np.sqrt(n)), "|ay|"
+    return None
+
+
 def find_segments(
     rec: Recording,
     *,
     min_speed: float = 5.0,
-    min_duration: float = 5.0,
+    min_duration: float | None = None,
     max_duration: float | None = None,
-    window: float = 2.0,
-    min_steer_std: float = 0.005,
-    min_torque_std: float = 100.0,
+    burn_in: float = 1.0,
     max_quiet: float = 3.0,
+    torques: bool | None = None,
+    min_torque_std: float = 100.0,
+    window: float = 2.0,
+    exclude: Sequence[tuple[float, float, str]] = (),
+    longest_minimum: float = np.inf,
     wheel_radius: float | None = None,
 ) -> list[Segment]:
     """Split a recording into usable and rejected stretches, covering all of it in time order.
 
     A sample is usable where the speed (`forward_speed`: vx, else mean wheel speed ×
-    `wheel_radius`, else the estimate from ax and ay ≈ v_x·r), averaged
-    over 0.5 s, is at least `min_speed` (the tire-slip model is singular near standstill) and
-    the inputs excite the dynamics: over a centred `window` the steering std is at least
-    `min_steer_std` or the total axle torque std at least `min_torque_std` (without torques,
-    the steering alone decides). Quiet spells shorter
-    than `max_quiet` between excited stretches are kept (the model runs through them). Runs of
-    usable samples shorter than `min_duration` are rejected; longer ones are split into equal
-    pieces no longer than `max_duration` if given.
+    `wheel_radius`, else the estimate from ax and ay ≈ v_x·r), averaged over 0.5 s, is at
+    least `min_speed` (the tire-slip model is singular near standstill) and the driving
+    informs the lateral dynamics: the lateral level (`lateral_level`: |v_x·r|, else |a_y|) is
+    at least `LATERAL_FLOOR` (0.03 g) and `NOISE_MULTIPLE` noise stds for at least
+    `LEVEL_WINDOW` s. Steady cornering counts (it sets the stiffnesses' steady-state gain) as
+    do steering transients; straight driving does not, however the steering wheel moves. With
+    `torques` (default: the recording has them) a total axle torque std over a centred `window` of at least
+    `min_torque_std` also counts. Quiet spells shorter than `max_quiet` between usable
+    stretches are kept (the model runs through them); stretches in `exclude` ((t0, t1, reason))
+    are rejected with their reason.
 
-    Defaults: 5 m/s is where kinematic slip errors of ~0.1 m/s stay below 2 %; 0.005 rad of
-    road-wheel angle gives ~1 m/s² of ay at 20 m/s; 100 N·m per car changes ax by ~0.2 m/s².
+    Each usable stretch takes up to `burn_in` s of the quiet driving before it as a lead-in
+    (the window's burn-in falls on the approach, not on the corner) and, if still shorter than
+    its minimum, up to `min_window(v, 0)` s of the quiet driving after it (the response
+    decays there). The minimum is `min_duration` if given, else `min_window` at the stretch's
+    mean speed (burn-in plus a few lateral time constants), at most `longest_minimum`. Longer
+    stretches are split into equal pieces no longer than `max_duration` if given.
 
     Returns:
-        Segments with reasons like "speed below 5 m/s" or "no excitation".
+        Segments whose reasons give the deciding figure: "cornering: |v·r| rms 2.1 m/s² …",
+        "straight: …", "speed below 5 m/s", "too short (…)", or an `exclude` reason.
     """
     t = rec.t
     speed = forward_speed(rec, wheel_radius if wheel_radius is not None else FALLBACK_WHEEL_RADIUS)
     if speed is None:
         return [Segment(float(t[0]), float(t[-1]), False, "no speed: no vx, wheel speeds or estimate")]
-    n_speed = max(1, int(round(0.5 * rec.rate)))
-    n_win = max(2, int(round(window * rec.rate)))
+    n_speed = max(1, int(round(LEVEL_WINDOW * rec.rate)))
     fast = _rolling(speed, n_speed, "mean") >= min_speed
-    steer_std = _rolling(rec.steer, n_win, "std")
-    excited = steer_std >= min_steer_std
-    if rec.has_torques:
-        excited |= _rolling(rec.torque_front + rec.torque_rear, n_win, "std") >= min_torque_std
+    lateral = lateral_level(rec, speed)
+    if lateral is None:
+        informed = np.ones(rec.num_samples, dtype=bool)
+    else:
+        level, level_noise, name = lateral
+        threshold = np.maximum(NOISE_MULTIPLE * level_noise, LATERAL_FLOOR)
+        informed = level >= threshold
+        # A corner or a transient lasts longer than the level's smoothing; shorter runs above
+        # the threshold are the noise's.
+        for i0, i1 in label_runs(informed):
+            if informed[i0] and i1 - i0 < n_speed:
+                informed[i0:i1] = False
+    use_torques = rec.has_torques and (torques is None or torques)
+    if use_torques:
+        n_win = max(2, int(round(window * rec.rate)))
+        torque_std = _rolling(rec.torque_front + rec.torque_rear, n_win, "std")
+        informed = informed | (torque_std >= min_torque_std)
     n_quiet = int(round(max_quiet * rec.rate))
-    runs = label_runs(excited)
+    runs = label_runs(informed)
     for k, (i0, i1) in enumerate(runs):
-        if not excited[i0] and 0 < k < len(runs) - 1 and i1 - i0 <= n_quiet:
-            excited[i0:i1] = True
-    label = np.where(~fast, 1, np.where(~excited, 2, 0))
-    steady = "steady steer and torque" if rec.has_torques else "steady steer"
-    reasons = {1: f"speed below {min_speed:g} m/s", 2: f"no excitation ({steady})"}
-    out: list[Segment] = []
-    for i0, i1 in label_runs(label):
-        a, b = float(t[i0]), float(t[i1 - 1])
-        code = int(label[i0])
-        if code:
-            out.append(Segment(a, b, False, reasons[code]))
-        elif b - a < min_duration:
-            out.append(Segment(a, b, False, f"too short ({b - a:.1f} s < {min_duration:g} s)"))
-        elif max_duration is not None and b - a > max_duration:
-            k = int(np.ceil((b - a) / max_duration))
-            edges = np.linspace(a, b, k + 1)
-            out.extend(Segment(float(edges[j]), float(edges[j + 1]), True, "") for j in range(k))
+        if not informed[i0] and 0 < k < len(runs) - 1 and i1 - i0 <= n_quiet:
+            informed[i0:i1] = True
+    label = np.where(~fast, SLOW, np.where(informed, USABLE, QUIET))
+    for k, (a, b, _) in enumerate(exclude):
+        label[fast & (t >= a - 1e-9) & (t <= b + 1e-9)] = EXCLUDED + k
+    runs = [[i0, i1, int(label[i0])] for i0, i1 in label_runs(label)]
+
+    def figure(i0: int, i1: int) -> str:
+        if lateral is None:
+            return "no ay or yaw rate to judge the lateral dynamics by"
+        rms = float(np.sqrt(np.mean(level[i0:i1] ** 2)))
+        thr = float(np.mean(threshold[i0:i1]))
+        noise = float(np.mean(level_noise[i0:i1]))
+        text = (
+            f"{name} rms {rms:.2f} m/s² = {rms / thr:.1f}× the {thr:.2f} m/s² threshold "
+            f"(0.03 g, {NOISE_MULTIPLE:g}× noise {noise:.3f} m/s²)"
+        )
+        if use_torques:
+            most = float(np.max(torque_std[i0:i1]))
+            text += f"; torque std up to {most:.0f} N·m (needs {min_torque_std:g})"
+        return text
+
+    # Lead-ins and run-outs first (they move the bounds of the quiet runs), then the segments.
+    n_lead = int(round(burn_in * rec.rate))
+    kept: dict[int, tuple[bool, str]] = {}
+    for k, run in enumerate(runs):
+        i0, i1, code = run
+        if code != USABLE:
+            continue
+        why = ("cornering: " if lateral is not None else "moving: ") + figure(i0, i1)
+        v = float(np.mean(np.abs(speed[i0:i1])))
+        prev = runs[k - 1] if k > 0 else None
+        if prev is not None and prev[2] == QUIET and n_lead > 0:
+            m = min(n_lead, prev[1] - prev[0])
+            prev[1] -= m
+            run[0] -= m
+            if m:
+                why += f"; with {m * rec.dt:.1f} s lead-in"
+        if min_duration is not None:
+            need, how = min_duration, f"{min_duration:g} s"
         else:
-            out.append(Segment(a, b, True, ""))
+            need = min(min_window(v, burn_in), longest_minimum)
+            how = f"{need:.1f} s at {v:.0f} m/s: burn-in {burn_in:g} s + {SETTLE:g} lateral time constants"
+        nxt = runs[k + 1] if k + 1 < len(runs) else None
+        missing = need - float(t[run[1] - 1] - t[run[0]])
+        if missing > 1e-9 and nxt is not None and nxt[2] == QUIET:
+            # The response to the last input decays within the fitted minimum; past it the
+            # straight informs nothing.
+            missing = min(missing, min_window(v, 0.0))
+            m = min(int(np.ceil(missing * rec.rate - 1e-6)), nxt[1] - nxt[0])
+            nxt[0] += m
+            run[1] += m
+            if m:
+                why += f"; with {m * rec.dt:.1f} s run-out"
+        duration = float(t[run[1] - 1] - t[run[0]])
+        kept[k] = (True, why) if duration >= need - 1e-9 else (False, f"too short ({duration:.1f} s < {how})")
+    out: list[Segment] = []
+    for k, (i0, i1, code) in enumerate(runs):
+        if i1 <= i0:
+            continue
+        a, b = float(t[i0]), float(t[i1 - 1])
+        if code == SLOW:
+            out.append(Segment(a, b, False, f"speed below {min_speed:g} m/s"))
+        elif code == QUIET:
+            out.append(Segment(a, b, False, f"straight: {figure(i0, i1)}"))
+        elif code >= EXCLUDED:
+            out.append(Segment(a, b, False, exclude[code - EXCLUDED][2]))
+        elif not kept[k][0] or max_duration is None or b - a <= max_duration:
+            out.append(Segment(a, b, *kept[k]))
+        else:
+            pieces = int(np.ceil((b - a) / max_duration))
+            edges = np.linspace(a, b, pieces + 1)
+            out.extend(Segment(float(edges[j]), float(edges[j + 1]), True, kept[k][1]) for j in range(pieces))
     return out
 
 

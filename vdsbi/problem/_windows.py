@@ -8,7 +8,6 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..io import Recording, find_segments, forward_speed, running_mean
-from ._limit import subtract
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,34 +91,52 @@ def choose_windows(
     *,
     wheel_radius: float,
     max_window: float,
-    min_duration: float,
     held_out: float,
     min_windows_to_split: int,
     max_windows: int | None,
+    burn_in: float = 1.0,
+    min_duration: float | None = None,
+    torques: bool = True,
     quiet_edges: bool = True,
     exclude: Sequence[tuple[float, float, str]] = (),
 ) -> tuple[list[Window], dict]:
     """Windows over every usable stretch of `rec`, and why.
 
-    The usable driving (`vdsbi.io.find_segments`: moving and excited) is cut into windows of at
-    most `max_window` s, each edge moved to the quietest nearby moment (`quiet_edges`). With
-    at least `min_windows_to_split` windows, those whose start lies in
-    the last `held_out` fraction of the usable driving time are held out whole (validation on
-    driving the fit never saw); a shorter drive keeps its windows and holds out the last
-    `held_out` fraction of each. With `max_windows`, the longest windows are kept (ties by time).
-    Stretches in `exclude` ((t0, t1, reason): limit handling) are cut out of the usable driving
-    and reported as rejected. With no usable stretch the whole recording is one window.
+    The usable driving (`vdsbi.io.find_segments`: moving and informing the lateral dynamics,
+    or with `torques` the longitudinal; each stretch with a lead-in of `burn_in` s and at least
+    `min_duration` s long, by default the burn-in plus a few lateral time constants at its
+    speed) is cut into windows of at most `max_window` s, each edge moved to the quietest
+    nearby moment (`quiet_edges`). With at least `min_windows_to_split` windows, those whose
+    start lies in the last `held_out` fraction of the usable driving time are held out whole
+    (validation on driving the fit never saw); a shorter drive keeps its windows and holds out
+    the last `held_out` fraction of each. With `max_windows`, the longest windows are kept
+    (ties by time). Stretches in `exclude` ((t0, t1, reason): limit handling) are rejected with
+    their reason. With no usable stretch the whole recording is one window.
 
     Returns:
-        windows in time order, and a description {"usable", "rejected", "how"}.
+        windows in time order, and a description: "usable" [[t0, t1]], "rejected"
+        [[t0, t1, reason]], "stretches" [[t0, t1, "kept: …" or "dropped: …"]] (the whole drive
+        in time order, with the figure that decided), "seconds" {"drive", "in_windows",
+        "dropped"}, and "how".
     """
-    shortest = min(min_duration, 0.9 * rec.duration)
-    segs = find_segments(rec, wheel_radius=wheel_radius, min_duration=shortest)
-    usable = subtract([(s.t0, s.t1) for s in segs if s.usable], list(exclude), shortest)
-    rejected = [(s.t0, s.t1, s.reason) for s in segs if not s.usable] + list(exclude)
+    longest = min(max_window, 0.9 * rec.duration)
+    segs = find_segments(
+        rec,
+        wheel_radius=wheel_radius,
+        min_duration=None if min_duration is None else min(min_duration, longest),
+        longest_minimum=longest,
+        burn_in=burn_in,
+        torques=torques,
+        exclude=exclude,
+    )
+    usable = [(s.t0, s.t1) for s in segs if s.usable]
+    rejected = [(s.t0, s.t1, s.reason) for s in segs if not s.usable]
     described = {
         "usable": [[round(a, 3), round(b, 3)] for a, b in usable],
         "rejected": [[round(a, 3), round(b, 3), why] for a, b, why in sorted(rejected)],
+        "stretches": [
+            [round(s.t0, 3), round(s.t1, 3), ("kept: " if s.usable else "dropped: ") + s.reason] for s in segs
+        ],
     }
     if not usable:
         usable = [(float(rec.t[0]), float(rec.t[-1]))]
@@ -129,8 +146,24 @@ def choose_windows(
     if activity is not None:
         pieces = _quiet_edges(rec, pieces, activity, max_window)
     if max_windows is not None and len(pieces) > max_windows:
-        pieces = sorted(sorted(pieces, key=lambda p: (-(p[1] - p[0]), p[0]))[:max_windows])
-    if len(pieces) >= min_windows_to_split:
+        chosen = sorted(sorted(pieces, key=lambda p: (-(p[1] - p[0]), p[0]))[:max_windows])
+        extra = [
+            [round(a, 3), round(b, 3), f"beyond max_windows={max_windows}"]
+            for a, b in pieces
+            if (a, b) not in chosen
+        ]
+        described["rejected"] = sorted(described["rejected"] + extra)
+        pieces = chosen
+    in_windows = sum(b - a for a, b in pieces)
+    described["seconds"] = {
+        "drive": round(rec.duration, 2),
+        "in_windows": round(in_windows, 2),
+        "dropped": round(rec.duration - in_windows, 2),
+    }
+    if held_out == 0.0:
+        windows = [Window(a, b, "train") for a, b in pieces]
+        how = f"{len(windows)} window(s) of <= {max_window:g} s over the usable driving; none held out"
+    elif len(pieces) >= min_windows_to_split:
         total = sum(b - a for a, b in pieces)
         elapsed = np.cumsum([0.0] + [b - a for a, b in pieces])[:-1]
         windows = [
