@@ -102,9 +102,17 @@ def test_diagnose_ends_with_the_identify_command_that_models_what_it_named(biase
     last = printed.strip().splitlines()[-1]
     rec, veh = biased
     target = out.parent / "identify-sensor_bias"
-    assert last == f"vdsbi identify {rec} --vehicle {veh} --out {target} --effects sensor_bias"
+    head = f"vdsbi identify {rec} --vehicle {veh} --out {target} --effects +sensor_bias"
+    assert last.startswith(head)
     parsed = build_parser().parse_args(shlex.split(last)[1:])
-    assert parsed.effects == "sensor_bias" and parsed.recording == str(rec)
+    assert parsed.effects == "+sensor_bias" and parsed.recording == [str(rec)]
+    # The priors are the ranges the diagnosis measured: each holds the value it reports.
+    rep = json.loads((out / "report.json").read_text())
+    priors = dict(p.split("=") for p in parsed.prior)
+    assert set(priors) == {f"sensor_bias.{k}" for k in rep["effect_params"]["sensor_bias"]}
+    for k, v in rep["effect_params"]["sensor_bias"].items():
+        lo, hi = map(float, priors[f"sensor_bias.{k}"].split(":"))
+        assert lo < v < hi
     assert last in (out / "report.md").read_text()
     assert json.loads((out / "report.json").read_text())["identify_command"] == last
 

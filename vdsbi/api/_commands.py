@@ -31,14 +31,14 @@ def identify_command(
     longitudinal: str = "auto",
     priors: Mapping[str, tuple[float, float]] | None = None,
 ) -> str:
-    """`vdsbi identify REC --vehicle V --out identify-NAMES --effects NAMES [--prior NAME=LO:HI …]`
-    with the effects a diagnosis named and the ranges it measured for their parameters (the
-    folder beside the diagnosis' `out`)."""
+    """`vdsbi identify REC --vehicle V --out identify-NAMES --effects +NAMES [--prior NAME=LO:HI …]`
+    adding the effects a diagnosis named to identify's defaults, with the ranges it measured for
+    their parameters (the folder beside the diagnosis' `out`)."""
     name = "identify-" + ("-".join(effects) or "base")
     target = name if out is None else str(Path(out).parent / name)
     cmd = (
         f"vdsbi identify {shown(recording, 'REC')} --vehicle {shown(vehicle, 'VEHICLE')} "
-        f"--out {shlex.quote(target)} --effects {','.join(effects) if effects else 'none'}"
+        f"--out {shlex.quote(target)} --effects {'+' + ','.join(effects) if effects else 'none'}"
     )
     cmd += "".join(f" --prior {n}={lo:.4g}:{hi:.4g}" for n, (lo, hi) in (priors or {}).items())
     return cmd + ("" if longitudinal == "auto" else f" --longitudinal {longitudinal}")

@@ -198,14 +198,15 @@ def _names(name: Path, folder: str) -> tuple[Path, Path, Path]:
 
 
 def _identify(rec, veh, d: Path, name: Path, folder: str, effects, *, budget, seed, progress, say, **kw):
-    """One identification of the demo drive into d/folder, its table in table.txt."""
+    """One identification of the demo drive into d/folder with identify's default effects and
+    `effects` added (as the command diagnose prints), its table in table.txt."""
     apt = {"rounds": budget.rounds, "sims": budget.sims, "epochs": budget.epochs}
     res = identify(
         rec,
         veh,
         embedding="stats",
         seed=seed,
-        effects=list(effects),
+        add_effects=list(effects),
         out_dir=d / folder,
         progress=progress,
         log=say,

@@ -34,6 +34,8 @@ from ..problem import (
 )
 from ..simulator import SpeedDriven, model_class, release_compiled_programs
 from ._commands import diagnose_command
+from ._progress import Progress
+from ._trust import trust_warnings
 from .outputs import (
     CHECKPOINT,
     ESTIMATOR,
@@ -43,8 +45,6 @@ from .outputs import (
     write_outputs,
     write_text_atomically,
 )
-from ._progress import Progress
-from ._trust import trust_warnings
 
 
 @dataclasses.dataclass
@@ -115,6 +115,7 @@ def identify(
     longitudinal: str = "auto",
     bandwidth: float | str | None = "auto",
     effects: Sequence[str] | None = None,
+    add_effects: Sequence[str] = (),
     priors: Mapping[str, tuple[float, float]] | None = None,
     holdout: float = 0.3,
     compare: Mapping[str, Any] | None = None,
@@ -153,6 +154,7 @@ def identify(
         longitudinal: "torque", "speed" (follow the measured speed) or "auto".
         bandwidth: low-pass cutoff, Hz, shared by measured and simulated channels.
         effects: effects whose parameters join θ; None: `default_effects`.
+        add_effects: effects added to `effects` (or to the defaults): what a diagnosis named.
         priors: {name: (low, high)} replacing the prior box of any parameter (e.g. the ranges
             `vdsbi diagnose` measured for an effect's parameters).
         holdout: fraction of the usable driving held out to validate on (0: none; the estimate
@@ -176,7 +178,7 @@ def identify(
     settings = _settings(rounds, sims, embedding, epochs, num_samples)
     prob = _problem(recs, veh, longitudinal, segment, max_duration, bandwidth, holdout)
     full = prob if holdout == 0 else _problem(recs, veh, longitudinal, segment, max_duration, bandwidth, 0.0)
-    effects = _effects(prob, effects, say)
+    effects = _effects(prob, effects, add_effects, say)
     box = _box(veh, effects, priors)
     run_info = _run_info(recs, prob, settings, seed, effects, box)
     _describe(prob, full, say)
@@ -280,21 +282,25 @@ def _problem(recs, veh, longitudinal: str, segment, max_duration, bandwidth, hol
     return concat_problems([make_problem(r, veh, settings) for r in recs])
 
 
-def _effects(prob: Problem, effects, say) -> tuple[str, ...]:
-    """The user's effects, else `default_effects` (each said with its reason)."""
+def _effects(prob: Problem, effects, add_effects, say) -> tuple[str, ...]:
+    """The user's effects, else `default_effects` (each said with its reason), then `add_effects`,
+    in the registry's order."""
     from ..simulator import EFFECTS
 
-    if effects is not None:
-        unknown = [e for e in effects if e not in EFFECTS]
-        if unknown:
-            raise InputError(
-                "settings", "--effects", f"unknown effect {unknown[0]!r}; known: {', '.join(EFFECTS)}"
-            )
-        return tuple(effects)
-    chosen = default_effects(prob)
-    for name, why in chosen:
-        say(f"{why}: {name} joins θ")
-    return tuple(name for name, _ in chosen)
+    unknown = [e for e in (*(effects or ()), *add_effects) if e not in EFFECTS]
+    if unknown:
+        known = ", ".join(EFFECTS)
+        raise InputError("settings", "--effects", f"unknown effect {unknown[0]!r}; known: {known}")
+    if effects is None:
+        chosen = default_effects(prob)
+        for name, why in chosen:
+            say(f"{why}: {name} joins θ")
+        effects = [name for name, _ in chosen]
+    for name in add_effects:
+        if name not in effects:
+            say(f"{name} joins θ (asked for)")
+    wanted = {*effects, *add_effects}
+    return tuple(e for e in EFFECTS if e in wanted)
 
 
 def _box(veh, effects, priors) -> Box:

@@ -57,7 +57,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         default=None,
         metavar="NAME[,NAME...]",
         help="effects whose parameters join θ (default: tyre_friction when the drive uses more "
-        "than half the grip, and yaw_inertia when following the speed with a yaw rate; 'none' for none)",
+        "than half the grip, yaw_inertia and signal_delay when following the speed with a yaw rate); "
+        "'+NAME,...' adds to the defaults, 'none' for none",
     )
     p.add_argument(
         "--compare",
@@ -102,7 +103,8 @@ def run(args) -> int:
         max_duration=args.max_duration,
         longitudinal=args.longitudinal,
         bandwidth="auto" if args.bandwidth is None else args.bandwidth,
-        effects=_effects(args.effects),
+        effects=_effects(args.effects)[0],
+        add_effects=_effects(args.effects)[1],
         compare=_compare(args.compare),
         priors=_priors(args.prior),
         holdout=args.holdout,
@@ -119,10 +121,16 @@ def run(args) -> int:
     return 0
 
 
-def _effects(text: str | None) -> list[str] | None:
+def _effects(text: str | None) -> tuple[list[str] | None, list[str]]:
+    """(effects, added effects): "a,b" replaces the defaults, "+a,b" adds to them, "none" is none."""
     if text is None:
-        return None
-    return [] if text.strip() == "none" else _args.effect_names(text.split(","))
+        return None, []
+    text = text.strip()
+    if text == "none":
+        return [], []
+    if text.startswith("+"):
+        return None, _args.effect_names(text[1:].split(","))
+    return _args.effect_names(text.split(",")), []
 
 
 def _priors(items: list[str]) -> dict[str, tuple[float, float]] | None:

@@ -268,20 +268,28 @@ def _best_start(wm, data: Problem, mask, starts: np.ndarray, effects, scale: np.
     return starts[int(np.argmin(np.nan_to_num(cost, nan=np.inf)))]
 
 
-def _fitter(wm, data: Problem, mask, box: Box, effects, z0, idx, max_steps):
-    """The jitted fit of the free coordinates for given per-channel stds (compiled once)."""
-    y, m = jnp.asarray(data.y), jnp.asarray(mask)
+def _residual(wm, y, mask, box: Box, effects, z0, idx, z_free, std):
+    theta, effect_params = split_parameters(box.from_unbounded(z0.at[idx].set(z_free)), effects)
+    pred, _ = wm(theta, effect_params)
+    return jnp.where(mask[..., None], (pred - y) / std, 0.0).ravel()
+
+
+@eqx.filter_jit
+def _lm(wm, y, mask, box: Box, effects, z0, idx, z_free, std, max_steps):
+    """One Levenberg–Marquardt fit of the free coordinates for given per-channel stds; a module-level
+    jit, so every fit of the same shapes (the reweighting passes, the refit) compiles once."""
     prec = jnp.full(idx.shape, PRIOR_Z_STD**-2)
+    return levenberg_marquardt(
+        lambda z: _residual(wm, y, mask, box, effects, z0, idx, z, std),
+        z_free,
+        prior_precision=prec,
+        max_steps=max_steps,
+        max_step=MAX_Z_STEP,
+    )
 
-    def residual(z_free, std):
-        theta, effect_params = split_parameters(box.from_unbounded(z0.at[idx].set(z_free)), effects)
-        pred, _ = wm(theta, effect_params)
-        return jnp.where(m[..., None], (pred - y) / std, 0.0).ravel()
 
-    @jax.jit
-    def fit(z_free, std):
-        return levenberg_marquardt(
-            lambda z: residual(z, std), z_free, prior_precision=prec, max_steps=max_steps, max_step=MAX_Z_STEP
-        )
-
-    return fit
+def _fitter(wm, data: Problem, mask, box: Box, effects, z0, idx, max_steps):
+    """The fit of the free coordinates as a function of (start, per-channel stds)."""
+    y, m = jnp.asarray(data.y), jnp.asarray(mask)
+    steps = jnp.asarray(max_steps)
+    return lambda z_free, std: _lm(wm, y, m, box, tuple(effects), z0, idx, z_free, std, steps)
