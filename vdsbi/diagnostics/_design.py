@@ -93,11 +93,11 @@ class Limits(eqx.Module):
     def frequencies(self, num: int) -> Box:
         """The box of `num` steer frequencies, [f_min, f_max] Hz each."""
         names = tuple(f"frequency_{k}" for k in range(num))
-        return Box(jnp.full(num, float(self.f_min)), jnp.full(num, float(self.f_max)), names)
+        return Box(np.full(num, float(self.f_min)), np.full(num, float(self.f_max)), names)
 
     def speeds(self) -> Box:
         """The box of the initial speed, [v0_min, v0_max] m/s."""
-        return Box(jnp.array([float(self.v0_min)]), jnp.array([float(self.v0_max)]), ("v0",))
+        return Box(np.array([float(self.v0_min)]), np.array([float(self.v0_max)]), ("v0",))
 
     @property
     def num_samples(self) -> int:
