@@ -4,7 +4,7 @@
 
 For each true θ (drawn from the built-in vehicle's prior) it simulates a 4 s drive with the
 vehicle's sensor noise (`vdsbi.api.simulate`), identifies θ from it with `vdsbi.api.identify`,
-and prints truth, posterior mean and whether the 90 % interval covers the truth.
+and prints truth, estimate and whether the 90 % interval covers the truth.
 """
 
 from __future__ import annotations
@@ -43,10 +43,10 @@ def main() -> None:
         res = api.identify(rec, vehicle, rounds=args.rounds, sims=args.sims, embedding="stats", seed=i)
         for name, t in zip(PARAM_NAMES, theta):
             p = res.summary["parameters"][name]
-            rows.append((i, name, t, p["mean"], p["std"], p["q05"] <= t <= p["q95"]))
+            rows.append((i, name, t, p["estimate"], p["std"], p["q05"] <= t <= p["q95"]))
         print(f"set {i} done", flush=True)
 
-    print(f"\n{'set':>3} {'param':<10} {'true':>11} {'mean':>11} {'std':>10}  90% covers")
+    print(f"\n{'set':>3} {'param':<10} {'true':>11} {'estimate':>11} {'std':>10}  90% covers")
     for i, name, t, m, s, cov in rows:
         print(f"{i:>3} {name:<10} {t:>11.4g} {m:>11.4g} {s:>10.3g}  {'yes' if cov else 'no'}")
     cover = np.mean([r[-1] for r in rows])

@@ -120,7 +120,7 @@ def baseline(train, test, ref: dict, delays) -> dict:
 def run_one(name: str, args, out: Path) -> dict:
     import jax
 
-    rec, veh = load_drive(REAL / name / "recording.csv", REAL / name / "vehicle.json")
+    rec, veh = load_drive(args.real / name / "recording.csv", args.real / name / "vehicle.json")
     cut = rec.t[0] + TRAIN_FRACTION * rec.duration
     first, rest = without_torques(rec, rec.t[0], cut), without_torques(rec, cut, rec.t[-1])
     t0 = time.perf_counter()
@@ -223,8 +223,17 @@ def main(argv=None) -> int:
     ap.add_argument("--sims", type=int, default=None)
     ap.add_argument("--rounds", type=int, default=None)
     ap.add_argument("--out", type=Path, default=None, help="folder for identify's runs (default: a temporary one)")
+    ap.add_argument("--real", type=Path, default=REAL, help="folder of drives (default ../shared/real)")
+    ap.add_argument("--rows", type=Path, default=None, help="write the rows here (JSON) and stop")
+    ap.add_argument("--merge", type=Path, nargs="*", default=None, help="tabulate rows written by --rows runs")
     args = ap.parse_args(argv)
-    drives = args.drives or sorted(p.name for p in REAL.iterdir() if (p / "recording.csv").is_file())
+    if args.merge is not None:
+        rows = [r for f in args.merge for r in json.loads(f.read_text())]
+        (RESULTS / "real_drives.json").write_text(json.dumps(rows, indent=2, default=float) + "\n")
+        (RESULTS / "real_drives.md").write_text(markdown(rows))
+        print(markdown(rows))
+        return 0
+    drives = args.drives or sorted(p.name for p in args.real.iterdir() if (p / "recording.csv").is_file())
     if args.quick:
         drives = args.drives or ["comma_rav4"]
         args.sims, args.rounds = args.sims or 300, args.rounds or 1
@@ -235,6 +244,9 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         out = args.out or Path(tmp)
         rows = [run_one(d, args, out) for d in drives]
+    if args.rows is not None:
+        args.rows.write_text(json.dumps(rows, indent=2, default=float) + "\n")
+        return 0
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / f"real_drives{tag}.json").write_text(json.dumps(rows, indent=2, default=float) + "\n")
     (RESULTS / f"real_drives{tag}.md").write_text(markdown(rows))

@@ -425,6 +425,12 @@ def _summary(full: Problem, samples, fit, state, run_info: dict, box: Box, effec
             params[n]["not_identified_because"] = "the channels do not depend on it in this mode"
         elif ratio > MAX_STD_RATIO:
             params[n]["not_identified_because"] = f"the drive leaves {ratio:.0%} of its prior std"
+        if n in fit.disagreement:
+            d = fit.disagreement[n]
+            params[n]["model_error"] = (
+                f"the data's halves ({d['split']}) disagree on it by {d['sigmas']:.1f} standard deviations: "
+                "the model lacks something that moves it; its interval is widened by the disagreement"
+            )
     speed = full.speed if full.speed is not None else np.broadcast_to(full.v0[:, None], full.t.shape)
     rms_speed = float(np.sqrt(np.mean(np.asarray(speed)[:, :: full.factor][full.train] ** 2)))
     prior = np.random.default_rng(0).uniform(box.low, box.high, (4000, box.dim))

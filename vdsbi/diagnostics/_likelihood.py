@@ -98,6 +98,9 @@ class LikelihoodPosterior(eqx.Module):
         noise: the noise model the fit ended with.
         converged: the last fit stopped by its tolerance, not its iteration cap.
         steps: iterations of each reweighted fit.
+        disagreement: {name: {"split", "z_shift"}} for parameters on which two halves of the data
+            (`_splits`) disagree beyond their uncertainty: the model lacks something that moves
+            them, and their variance was widened by the disagreement (`_consistent`).
     """
 
     box: Box
@@ -107,6 +110,7 @@ class LikelihoodPosterior(eqx.Module):
     noise: NoiseModel
     converged: bool
     steps: tuple[int, ...]
+    disagreement: dict = eqx.field(default_factory=dict)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -199,12 +203,16 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, solver)
     flat = (jac / np.sqrt(tau)[:, None]).reshape(-1, len(idx))
     cov_free = np.asarray(laplace_covariance(jnp.asarray(flat), prec))
     cov_free = _robust(cov_free, jac, resid / scale, mask, prec, BLOCK_TAUS * float(tau.max()))
+    splits = _splits(data, mask)
+    root_tau = np.sqrt(tau)
+    cov_free, shifts = _consistent(cov_free, jac / root_tau[:, None], resid / scale / root_tau, prec, splits)
     cov = np.diag(np.full(len(names), PRIOR_Z_STD**2))
     cov[np.ix_(idx, idx)] = cov_free
     z_all = z0.copy()
     z_all[idx] = np.asarray(z)
     noise = NoiseModel(data.channels, scale, tau, sensor, mask.sum() * np.ones_like(scale))
-    return LikelihoodPosterior(box, z_all, cov, free, noise, converged, tuple(steps))
+    disagree = {free[i]: v for i, v in shifts.items()}
+    return LikelihoodPosterior(box, z_all, cov, free, noise, converged, tuple(steps), disagree)
 
 
 #: Blocks of the robust covariance span this many autocorrelation times.
@@ -243,6 +251,66 @@ def _robust(cov: np.ndarray, jac: np.ndarray, r: np.ndarray, mask: np.ndarray, p
     sandwich = h_inv @ (g.T @ g * len(g) / (len(g) - 1)) @ h_inv
     factor = np.sqrt(np.maximum(1.0, np.diag(sandwich) / np.diag(cov)))
     return cov * np.outer(factor, factor)
+
+
+#: Two halves of the data disagree on a parameter when their estimates differ by more than this
+#: many standard deviations of the difference.
+DISAGREE_Z = 2.0
+
+
+def _splits(data: Problem, mask: np.ndarray) -> list[tuple[str, np.ndarray]]:
+    """Ways to halve the fitted samples, as (name, (W, K, C) mask of half A; half B is the rest):
+    by channel (a_y against yaw rate), by excitation (the samples with the larger measured lateral
+    motion), and by time (the first windows against the last). A right model explains each half
+    with the same θ; a missing effect usually does not act alike on both."""
+    W, K, C = data.y.shape
+    full = np.broadcast_to(mask[..., None], (W, K, C))
+    out = []
+    if "ay" in data.channels and "yaw_rate" in data.channels:
+        out.append(("ay against yaw rate", full & (np.arange(C) == data.channels.index("ay"))))
+    lateral = data.channels.index("ay") if "ay" in data.channels else data.channels.index("yaw_rate")
+    level = np.abs(data.y[..., lateral]) if "ay" in data.channels or "yaw_rate" in data.channels else None
+    if level is not None:
+        out.append(("high against low lateral motion", full & (level >= np.median(level[mask]))[..., None]))
+    if W >= 2:
+        out.append(("first against last windows", full & (np.arange(W) < W // 2)[:, None, None]))
+    else:
+        first = np.arange(K) < np.flatnonzero(mask[0]).mean()
+        out.append(("first against second half", full & first[None, :, None]))
+    return out
+
+
+def _consistent(cov: np.ndarray, jac: np.ndarray, r: np.ndarray, prec, splits) -> tuple[np.ndarray, dict]:
+    """`cov` widened where halves of the data disagree: each half's estimate is one Newton step
+    from the joint fit (z_A = ẑ − H_A⁻¹g_A, each half with half the prior), and a parameter whose
+    halves differ by d with |d| > `DISAGREE_Z`·sd(d) gets d² added to its variance (a systematic
+    error of the size the halves reveal), the largest over the splits.
+
+    Args:
+        cov: (P, P) covariance so far.
+        jac: (W, K, C, P) Jacobian of the residuals whitened by their full per-sample std.
+        r: (W, K, C) those residuals.
+        prec: (P,) prior precision.
+        splits: `_splits`.
+    """
+    extra, shifts = np.zeros(len(prec)), {}
+    for name, half in splits:
+        est, var = [], []
+        for m in (half, ~half):
+            j = np.where(m[..., None], jac, 0.0).reshape(-1, jac.shape[-1])
+            g = j.T @ np.where(m, r, 0.0).ravel()
+            h_inv = np.linalg.pinv(j.T @ j + np.diag(0.5 * np.asarray(prec)))
+            est.append(-h_inv @ g)
+            var.append(np.diag(h_inv))
+        d = est[0] - est[1]
+        sd = np.sqrt(var[0] + var[1])
+        for i in np.flatnonzero(np.abs(d) > DISAGREE_Z * sd):
+            if d[i] ** 2 > extra[i]:
+                extra[i] = d[i] ** 2
+                sigmas = abs(float(d[i] / sd[i]))
+                shifts[int(i)] = {"split": name, "z_shift": abs(float(d[i])), "sigmas": sigmas}
+    factor = np.sqrt((np.diag(cov) + extra) / np.diag(cov))
+    return cov * np.outer(factor, factor), shifts
 
 
 def _informed(wm, data: Problem, box: Box, z0: np.ndarray, effects) -> tuple[str, ...]:
