@@ -33,7 +33,7 @@ from jaxtyping import Array, Float
 
 from ..diagnostics import laplace_covariance, levenberg_marquardt
 from ..problem import Box, Problem, WindowedModel, windowed_model
-from ..simulator import EFFECTS, PARAM_NAMES, Solver, Vehicle, VehicleModel, make_model
+from ..simulator import EFFECTS, PARAM_NAMES, AbstractVehicleModel, Solver, Vehicle, make_model, model_class
 from ._candidates import EffectSpace, effect_space
 from ._results import DiscoveryFit
 
@@ -46,7 +46,7 @@ MAX_Z_STEP = 2.0
 EDGE = 1e-9
 
 
-def super_model(vehicle: Vehicle, effects: EffectSpace, longitudinal: str = "torque") -> VehicleModel:
+def super_model(vehicle: Vehicle, effects: EffectSpace, longitudinal: str = "torque") -> AbstractVehicleModel:
     """All candidate effects, in registry order. At their null values they vanish exactly
     (the lags' states are frozen and bypassed at τ = 0, so nothing stiff remains and a 5 ms
     RK4 step is stable; τ is bounded below by 5 ms when fitted: |λ|·h ≤ 1.2)."""
@@ -54,7 +54,7 @@ def super_model(vehicle: Vehicle, effects: EffectSpace, longitudinal: str = "tor
         return make_model(vehicle, effects.names, longitudinal=longitudinal)
     # unregistered effects (a discovered-term effect) are built from their classes
     mods = tuple(effects.classes[n]() for n in effects.names)
-    return VehicleModel(vehicle=vehicle, effects=mods, longitudinal=longitudinal)
+    return model_class(longitudinal)(vehicle=vehicle, effects=mods)
 
 
 class Space(eqx.Module):
