@@ -82,7 +82,7 @@ def test_a_short_corner_is_its_own_window_and_a_blip_is_too_short():
     t = DT * np.arange(int(40.0 / DT))
     d = 0.0135
     steer = _smooth_steps(t, [10.0, 12.0], [0.0, d, 0.0], ramp=0.5)
-    steer += 0.004 * np.exp(-(((t - 30.0) / 0.1) ** 2))
+    steer += 0.0005 * np.exp(-(((t - 30.0) / 0.1) ** 2))
     rec = _recording(steer)
     prob = make_problem(rec, default_vehicle(), ProblemSettings(longitudinal="speed", max_window=10.0))
     assert len(prob.windows) == 1
@@ -103,7 +103,7 @@ def test_minimum_window_follows_the_lateral_time_constant():
 
 
 def test_a_noisy_lateral_channel_raises_the_bar_above_the_floor():
-    # A gentle 0.6 m/s² corner passes the 0.03 g floor on a clean gyro and not on one whose
+    # A gentle 0.6 m/s² corner passes the 0.005 g floor on a clean gyro and not on one whose
     # noise, 0.15 rad/s at 200 Hz, puts three stds of the 0.5 s mean of |v·r| at 1.35 m/s².
     t = DT * np.arange(int(30.0 / DT))
     steer = _smooth_steps(t, [10.0, 20.0], [0.0, 0.0028, 0.0])

@@ -46,10 +46,10 @@ def label_runs(labels: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(starts.tolist(), stops.tolist()))
 
 
-#: Lateral specific force below which a stretch counts as straight, m/s²: 0.03 g, the ay of a
-#: 3 % road crossfall or of a 1 mrad road-wheel angle offset at 25 m/s; below it the lateral
-#: signal cannot be told from the road's and the sensors' offsets.
-LATERAL_FLOOR = 0.03 * GRAVITY
+#: Lateral motion below which a stretch counts as straight, m/s²: 0.005 g, the v·r a MEMS gyro's
+#: bias (1.5 mrad/s) makes at 30 m/s; below it the yaw signal cannot be told from the sensor's
+#: offset. (Gentle highway curves, 0.005–0.04 g, still inform the steady yaw gain.)
+LATERAL_FLOOR = 0.005 * GRAVITY
 #: ... and it must stand this many noise stds (of the 0.5 s mean) above the noise.
 NOISE_MULTIPLE = 3.0
 #: Axle cornering stiffness per axle load, /rad, for the lateral time constant: the geometric
@@ -112,7 +112,7 @@ def find_segments(
     `wheel_radius`, else the estimate from ax and ay ≈ v_x·r), averaged over 0.5 s, is at
     least `min_speed` (the tire-slip model is singular near standstill) and the driving
     informs the lateral dynamics: the lateral level (`lateral_level`: |v_x·r|, else |a_y|) is
-    at least `LATERAL_FLOOR` (0.03 g) and `NOISE_MULTIPLE` noise stds for at least
+    at least `LATERAL_FLOOR` (0.005 g) and `NOISE_MULTIPLE` noise stds for at least
     `LEVEL_WINDOW` s. Steady cornering counts (it sets the stiffnesses' steady-state gain) as
     do steering transients; straight driving does not, however the steering wheel moves. With
     `torques` (default: the recording has them) a total axle torque std over a centred `window` of at least
@@ -172,7 +172,7 @@ def find_segments(
         noise = float(np.mean(level_noise[i0:i1]))
         text = (
             f"{name} rms {rms:.2f} m/s² = {rms / thr:.1f}× the {thr:.2f} m/s² threshold "
-            f"(0.03 g, {NOISE_MULTIPLE:g}× noise {noise:.3f} m/s²)"
+            f"({LATERAL_FLOOR / GRAVITY:g} g, {NOISE_MULTIPLE:g}× noise {noise:.3f} m/s²)"
         )
         if use_torques:
             most = float(np.max(torque_std[i0:i1]))

@@ -43,7 +43,7 @@ class ProblemSettings:
             longitudinal motion follows the measured speed; for logs without torques or with
             commanded ones), or "auto" (torque if the recording has torques, else speed).
         max_window: longest window, s (each window is simulated from its own initial state).
-        held_out: fraction of the usable driving held out for validation.
+        held_out: fraction of the usable driving held out for validation (0: none).
         min_windows_to_split: with at least this many windows, whole windows at the end of the
             drive are held out; fewer, and the end of each window is.
         max_windows: keep at most this many windows (the longest); None keeps all.
@@ -79,8 +79,8 @@ class ProblemSettings:
             raise ValueError(f"limit_handling must be 'exclude' or 'keep', got {self.limit_handling!r}")
         if self.longitudinal not in (*LONGITUDINAL_MODES, "auto"):
             raise ValueError(f"longitudinal must be 'torque', 'speed' or 'auto', got {self.longitudinal!r}")
-        if not 0.0 < self.held_out < 1.0:
-            raise ValueError(f"held_out must lie in (0, 1), got {self.held_out}")
+        if not 0.0 <= self.held_out < 1.0:
+            raise ValueError(f"held_out must lie in [0, 1), got {self.held_out}")
         if not self.max_window > 0:
             raise ValueError(f"max_window must be > 0, got {self.max_window}")
 
