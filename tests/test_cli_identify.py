@@ -250,3 +250,40 @@ def test_compare_scores_reference_values_on_the_held_out_part(full_run):
     for scores in (ref["channels"], post["validation"]["estimate"]["channels"]):
         assert set(scores) == set(CHANNELS)
         assert all(v["nrmse"] >= 0 and v["chi2_dof"] >= 0 and v["samples"] > 0 for v in scores.values())
+
+
+def test_predict_simulates_another_drive_at_the_estimate_with_the_held_out_code(
+    full_run, drive, tmp_path, capsys
+):
+    rec, _ = drive
+    out = tmp_path / "pred.csv"
+    assert main(["predict", str(full_run), "--inputs", str(rec), "--out", str(out), "--band"]) == 0
+    printed = capsys.readouterr().out
+    pred = pd.read_csv(out)
+    post = json.loads((full_run / "posterior.json").read_text())
+    for c in post["channels"]:
+        assert {c, f"{c}_predicted", f"{c}_q05", f"{c}_q95"} <= set(pred.columns)
+        assert np.all(pred[f"{c}_q05"] <= pred[f"{c}_q95"])
+        assert f"{c}: NRMSE" in printed
+    # The same drive, the same code: predict's yaw-rate error is the fit's, far below the signal.
+    err = pred["yaw_rate_predicted"] - pred["yaw_rate"]
+    assert np.sqrt(np.mean(err**2)) < 0.5 * np.std(pred["yaw_rate"])
+
+
+@pytest.mark.parametrize("bad", ["C_alpha_f", "C_alpha_f=1:", "nonsense.x=0:1", "C_alpha_f=9:1"])
+def test_a_bad_prior_exits_2_before_any_work(drive, tmp_path, bad, capsys):
+    rec, veh = drive
+    args = [
+        "identify",
+        str(rec),
+        "--vehicle",
+        str(veh),
+        "--out",
+        str(tmp_path / "o"),
+        "--prior",
+        bad,
+        "--quiet",
+    ]
+    assert main(args) == 2
+    assert "prior" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
