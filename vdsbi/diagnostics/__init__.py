@@ -38,7 +38,6 @@ from ._least_squares import (
     gauss_newton_fit as gauss_newton_fit,
     laplace_covariance as laplace_covariance,
     levenberg_marquardt as levenberg_marquardt,
-    logit as logit,
 )
 from ._likelihood import (
     LikelihoodPosterior as LikelihoodPosterior,

@@ -186,10 +186,3 @@ def gauss_newton_fit(
     fn = lambda z: ((mean_fn(z) - x) / std).reshape(-1)
     sol = levenberg_marquardt(fn, z0, max_steps=num_iters, rtol=0.0, damping=damping)
     return FitResult(z=sol.z, cov_z=laplace_covariance(sol.jacobian), cost=sol.cost)
-
-
-def logit(p: ArrayLike, eps: float = 1e-9) -> np.ndarray:
-    """log(p / (1 − p)), with p clipped to [eps, 1 − eps]: the unbounded coordinate of a value
-    a fraction p into its box (the inverse of `lo + (hi − lo)·sigmoid(z)`)."""
-    p = np.clip(np.asarray(p, dtype=float), eps, 1 - eps)
-    return np.log(p) - np.log1p(-p)
