@@ -174,7 +174,9 @@ def fit_likelihood(
 
 def _fit(problem, start, box, effects, free, part, reweights, max_steps, solver):
     names = box.names
-    data = problem.select(part)
+    # Every window, the others masked: the validation fit and the refit on all the driving then
+    # share one problem shape, and so one compilation.
+    data = problem
     mask = np.asarray(data.part(part))
     box64 = Box(jnp.asarray(box.low, jnp.float64), jnp.asarray(box.high, jnp.float64), names)
     wm = windowed_model(data, effects, solver)
@@ -313,14 +315,18 @@ def _consistent(cov: np.ndarray, jac: np.ndarray, r: np.ndarray, prec, splits) -
     return cov * np.outer(factor, factor), shifts
 
 
-def _informed(wm, data: Problem, box: Box, z0: np.ndarray, effects) -> tuple[str, ...]:
-    """Parameters the compared channels depend on at z0 (C_κ without torques: none)."""
-
+@eqx.filter_jit
+def _jacobian(wm, box: Box, effects, z):
     def compared(z):
         theta, ep = split_parameters(box.from_unbounded(z), effects)
         return wm(theta, ep)[0]
 
-    jac = np.asarray(jax.jacfwd(compared)(jnp.asarray(z0)))
+    return jax.jacfwd(compared)(z)
+
+
+def _informed(wm, data: Problem, box: Box, z0: np.ndarray, effects) -> tuple[str, ...]:
+    """Parameters the compared channels depend on at z0 (C_κ without torques: none)."""
+    jac = np.asarray(_jacobian(wm, box, tuple(effects), jnp.asarray(z0)))
     jac = np.where(np.asarray(data.valid)[..., None, None], jac, 0.0)
     return tuple(n for n, col in zip(box.names, np.moveaxis(jac, -1, 0)) if np.any(col != 0.0))
 
