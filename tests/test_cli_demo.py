@@ -38,8 +38,10 @@ def test_demo_runs_the_whole_loop_into_one_folder(tmp_path):
     )
     out = tmp_path / "demo"
     res = api.demo(out, budget=budget)
-    (miss,) = [w for w in res.identified.summary["warnings"] if w["kind"] == "predictive_miss"]
-    assert miss["channels"]["ax"] < 0.5 and "omega_front" not in miss["channels"]
+    # The base model misses the biased accelerometer by far more than its noise: said, with the
+    # command to run.
+    (miss,) = [w for w in res.identified.summary["warnings"] if w["kind"] == "model_error"]
+    assert miss["channels"]["ax"] > 3.0
     assert (
         f"vdsbi diagnose {out}/recording.csv --vehicle {out}/vehicle.json --out {out}/diagnose"
         in miss["message"]

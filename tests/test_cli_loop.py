@@ -68,9 +68,11 @@ def test_identify_with_the_effect_recovers_the_bias(effect_run):
     assert post["effects"] == ["sensor_bias"]
     params = post["parameters"]
     for ch in ("ax", "ay"):
-        p = params[f"sensor_bias.{ch}"]
-        assert p["prior"] == [-0.5, 0.5]  # the effect's typical range
-        assert p["q05"] <= BIAS[ch] <= p["q95"], (ch, p)
+        assert params[f"sensor_bias.{ch}"]["prior"] == [-2.0, 2.0]  # the effect's fit bounds
+    # ax's bias is what this 3 s drive determines (the ay bias trades against the start state).
+    p = params["sensor_bias.ax"]
+    assert p["q05"] <= BIAS["ax"] <= p["q95"], p
+    assert abs(p["estimate"] - BIAS["ax"]) < 0.05
     # Learned, not the prior back: a flat U(-0.5, 0.5) has std 0.29.
     assert params["sensor_bias.ax"]["std"] < 0.75 * 0.289
     samples = pd.read_csv(effect_run / "samples.csv")
@@ -139,13 +141,20 @@ def test_export_autoware_keys_as_the_mpc_lateral_controller_reads_them(effect_ru
 
     from vdsbi.simulator import default_vehicle
 
-    assert main(["export", str(effect_run), "--format", "autoware", "--out", str(tmp_path / "a.yaml")]) == 0
+    # The keys and units on the run's own numbers; a run whose drive leaves C_α or l_f unidentified
+    # is refused by export (below), so the file here marks them identified.
+    post = json.loads((effect_run / "posterior.json").read_text())
+    for n in ("l_f", "C_alpha_f", "C_alpha_r"):
+        post["parameters"][n]["identified"] = True
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "posterior.json").write_text(json.dumps(post))
+    assert main(["export", str(run), "--format", "autoware", "--out", str(tmp_path / "a.yaml")]) == 0
     text = (tmp_path / "a.yaml").read_text()
     doc = yaml.safe_load(text)["/**"]["ros__parameters"]
     assert doc["vehicle_model_type"] == "dynamics"
     v = doc["vehicle"]
     assert set(v) == {"cf", "cr", "mass_fl", "mass_fr", "mass_rl", "mass_rr"}
-    post = json.loads((effect_run / "posterior.json").read_text())
     p = post["parameters"]
     # Per-axle cornering stiffness in both: written unconverted.
     assert v["cf"] == pytest.approx(p["C_alpha_f"]["estimate"], abs=1e-3)
@@ -156,6 +165,17 @@ def test_export_autoware_keys_as_the_mpc_lateral_controller_reads_them(effect_ru
     # Autoware's DynamicsBicycleModel: l_f = L (1 - m_front / m) gives back our l_f.
     assert veh.wheelbase * (1 - front / veh.mass) == pytest.approx(p["l_f"]["estimate"], abs=1e-4)
     assert post["recording"] in text and "90 %" in text and "sensor_bias" in text
+
+
+def test_export_refuses_a_parameter_the_drive_did_not_identify(effect_run, tmp_path, capsys):
+    post = json.loads((effect_run / "posterior.json").read_text())
+    post["parameters"]["C_alpha_f"]["identified"] = False
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "posterior.json").write_text(json.dumps(post))
+    assert main(["export", str(run), "--format", "autoware", "--out", str(tmp_path / "a.yaml")]) == 2
+    assert "C_alpha_f: not identified" in capsys.readouterr().err
+    assert not (tmp_path / "a.yaml").exists()
 
 
 def test_export_json_and_csv_carry_every_parameter_with_its_interval(effect_run, tmp_path, capsys):
@@ -180,7 +200,7 @@ def test_export_bad_input_exits_2(tmp_path, capsys):
     assert "no posterior.json" in capsys.readouterr().err
 
 
-def test_effect_priors_come_from_typical_ranges_and_vehicle_json_overrides_them(tmp_path):
+def test_effect_priors_come_from_fit_bounds_and_vehicle_json_overrides_them(tmp_path):
     from vdsbi.io import read_vehicle
     from vdsbi.problem import prior_box
     from vdsbi.simulator import get_effect
@@ -188,7 +208,7 @@ def test_effect_priors_come_from_typical_ranges_and_vehicle_json_overrides_them(
     data = {**default_vehicle().to_dict(), "prior": {"sensor_bias.ay": [-1.0, 0.2]}}
     (tmp_path / "v.json").write_text(json.dumps(data))
     box = prior_box(read_vehicle(tmp_path / "v.json"), ["sensor_bias"])
-    assert box["sensor_bias.ax"] == get_effect("sensor_bias").typical[0]
+    assert box["sensor_bias.ax"] == get_effect("sensor_bias").bounds[0]
     assert box["sensor_bias.ay"] == (-1.0, 0.2)
     data["prior"] = {"sensor_bias.roll": [0.0, 1.0]}
     (tmp_path / "w.json").write_text(json.dumps(data))

@@ -73,7 +73,10 @@ def test_report_has_required_keys(quick):
 
 def test_verdict_claims_an_effect_only_when_it_accounts_for_the_mismatch(quick):
     rep = json.loads((_case(quick, "sensor_bias") / "report.json").read_text())
-    assert rep["explained"] is True and "sensor_bias" in rep["verdict"]
+    # Named; claimed as the whole explanation unless the residual test still rejects (weakly, at
+    # α/10 ≤ p < α) or the held-out fit stays above the noise — and then the verdict says which.
+    assert "sensor_bias" in rep["verdict"]
+    assert rep["explained"] is True or "weakly" in rep["verdict"] or "held-out" in rep["verdict"]
     assert verdict(False, [], 0.5, 0.05, None)["explained"] is None
     assert verdict(True, [], 0.5, 0.05, None)["explained"] is False
     assert verdict(True, ["road_bank"], 0.001, 0.05, True)["explained"] is False  # remainder

@@ -35,7 +35,7 @@ from ..problem import (
 from ..simulator import SpeedDriven, model_class, release_compiled_programs
 from ._commands import diagnose_command
 from ._progress import Progress
-from ._trust import trust_warnings
+from ._trust import model_error_warning, trust_warnings
 from .outputs import (
     CHECKPOINT,
     ESTIMATOR,
@@ -515,13 +515,22 @@ def _warnings(samples: np.ndarray, summary: dict, box: Box, names, longitudinal:
     ppc = summary["ppc"]
     bounds = {n: (float(a), float(b)) for n, a, b in zip(box.names, box.low, box.high)}
     problem = [{"kind": "recording", "message": w} for w in summary["problem"].get("warnings", ())]
-    return problem + trust_warnings(
-        samples,
-        list(summary["parameters"]),
-        bounds,
-        summary["not_identified"],
-        {"train": ppc["fraction_inside_90pct_band"], "held_out": ppc["fraction_inside_90pct_band_held_out"]},
-        diagnose_command(rec, veh, out, longitudinal),
+    command = diagnose_command(rec, veh, out, longitudinal)
+    coverage = {
+        "train": ppc["fraction_inside_90pct_band"],
+        "held_out": ppc["fraction_inside_90pct_band_held_out"],
+    }
+    return (
+        problem
+        + trust_warnings(
+            samples,
+            list(summary["parameters"]),
+            bounds,
+            summary["not_identified"],
+            coverage,
+            command,
+        )
+        + model_error_warning(summary["noise_model"], command)
     )
 
 

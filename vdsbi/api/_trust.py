@@ -16,6 +16,9 @@ PILE = 0.25
 #: A channel misses when less than this share of the recording lies inside the 90 % predictive
 #: band (nominal 0.90; a right model with a sound posterior is near 0.9 or above).
 MISS = 0.5
+#: A channel's model error is worth diagnosing when its residual after the best fit exceeds the
+#: sensor noise this many times.
+MODEL_ERROR = 3.0
 
 
 def edge_mass(samples: np.ndarray, box: Sequence[tuple[float, float]]) -> np.ndarray:
@@ -76,6 +79,25 @@ def trust_warnings(
             }
         )
     return out
+
+
+def model_error_warning(noise_model: Mapping[str, Mapping[str, float]], diagnose_command: str) -> list[dict]:
+    """A warning (empty list when none) naming the channels the best fit misses by more than
+    `MODEL_ERROR` times their sensor noise: the intervals hold the model error, but something the
+    model lacks may be found and modelled."""
+    ratios = {c: float(v["model_error_ratio"]) for c, v in noise_model.items()}
+    worse = {c: r for c, r in ratios.items() if r > MODEL_ERROR}
+    if not worse:
+        return []
+    what = ", ".join(f"{c} ({r:.1f}× its sensor noise)" for c, r in worse.items())
+    return [
+        {
+            "kind": "model_error",
+            "channels": worse,
+            "message": f"the best fit misses {what}; the intervals include that model error, but the "
+            f"model may lack physics the recording has: run `{diagnose_command}`",
+        }
+    ]
 
 
 def _missed(coverage: Mapping[str, Mapping[str, float | None]]) -> dict[str, float]:

@@ -25,10 +25,10 @@ from ._candidates import effect_space, label
 from ._data import compared_inputs, held_out_scores
 from ._fit import Fitter
 from ._rank import (
-    HELD_OUT_CLAIM,
     STRONG,
     bic_score,
     choose,
+    claim_limit,
     merge,
     rank,
     separability,
@@ -212,7 +212,7 @@ def _decide(search: _Search, fitter: Fitter, base: DiscoveryFit, detected: bool,
 def _describe_remainder(fitter: Fitter, base, decision, after, held_ok, s, say):
     """Candidate terms for what the chosen effects leave (`discover_terms`), when a mismatch
     was detected and the fix leaves the residual inconsistent with noise or the held-out
-    χ²/dof above `HELD_OUT_CLAIM`; and the residual test of their refit."""
+    χ²/dof above `claim_limit`; and the residual test of their refit."""
     if s.max_terms <= 0 or (after.test.p_value >= s.alpha and held_ok):
         return None, None
     terms = lambda fit, chosen: discover_terms(
@@ -330,7 +330,8 @@ def _find(windows: Problem, vehicle: Vehicle, s: DiagnoseSettings, names: tuple[
     decision = _decide(search, fitter, base, detected, s, say)
     after = _check(decision.final, fitted, s.seed + 1, s)
     predictions, variances, held = _held_out(fitter, windows, {"before": base, "after": decision.final})
-    held_ok = not detected or worst_channel(held["after"])[1] <= HELD_OUT_CLAIM
+    worst = worst_channel(held["after"])
+    held_ok = not detected or worst[1] <= claim_limit(worst[2])
     terms, test_terms = _describe_remainder(fitter, base, decision, after, held_ok, s, say)
     if terms is not None and terms.fit is not None:
         extra = _held_out(terms.fitter, windows, {"after_terms": terms.fit})

@@ -28,7 +28,7 @@ import numpy as np
 from ..simulator import TERMS, term_effect, term_formula
 from ._candidates import effect_space
 from ._fit import Fitter, _whitened
-from ._rank import HELD_OUT_CLAIM, STRONG, bic_score, worst_channel
+from ._rank import STRONG, bic_score, claim_limit, worst_channel
 from ._results import DiscoveryFit, TermDiscovery
 
 TERM_EFFECT = "discovered_terms"
@@ -204,14 +204,15 @@ def terms_section(
     """The discovered terms, their held-out fit and test, and what explained the mismatch:
     "discovered term" (kept terms that also predict the held-out part better: held-out
     log-likelihood gain ½·Σ(χ²_library − χ²_terms) ≥ `STRONG`), "library" (the chosen effects
-    leave p ≥ α/10 and a held-out χ²/dof ≤ `HELD_OUT_CLAIM` in every channel), "unexplained",
+    leave p ≥ α/10 and a held-out χ²/dof ≤ `claim_limit` in every channel), "unexplained",
     or "none" (no mismatch).
 
     `p_before`, `p_after`, `p_terms`: the residual tests of the base fit, the chosen effects'
     fit and the refit with the terms; `held_after`, `held_terms` the held-out scores per
     channel after the library fix and with the terms; `n_held` held-out samples per channel."""
     detected = bool(p_before < alpha)
-    held_ok = worst_channel(held_after)[1] <= HELD_OUT_CLAIM
+    worst = worst_channel(held_after)
+    held_ok = worst[1] <= claim_limit(worst[2])
     library = detected and bool(chosen) and p_after >= alpha / 10 and held_ok
     out: dict = {"discovered_terms": [], "p_value_after_terms": None, "terms_replace": []}
     td = terms
