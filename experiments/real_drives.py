@@ -36,6 +36,7 @@ from vdsbi.io import build_recording, load_drive  # noqa: E402
 from vdsbi.problem import (  # noqa: E402
     ProblemSettings,
     band_coverage,
+    channel_scores,
     make_problem,
     predict,
     predictive_band,
@@ -63,13 +64,9 @@ def without_torques(rec, t0: float, t1: float):
 
 
 def nrmse(problem, pred, mask) -> dict[str, float]:
-    out = {}
-    for c in CHANNELS:
-        if c in problem.channels:
-            i = problem.channels.index(c)
-            y = problem.y[..., i][mask]
-            out[c] = float(np.sqrt(np.mean((pred[..., i][mask] - y) ** 2)) / np.std(y))
-    return out
+    """Held-out NRMSE of the channels compared here, by the code identify scores with."""
+    scores = channel_scores(problem, pred, mask)
+    return {c: scores[c]["nrmse"] for c in CHANNELS if c in scores}
 
 
 def baseline(train, test, ref: dict, delays) -> dict:

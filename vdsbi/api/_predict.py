@@ -13,6 +13,7 @@ import pandas as pd
 from ..io import InputError, read_recording
 from ..problem import (
     ProblemSettings,
+    band_coverage,
     channel_scores,
     make_problem,
     predict as predict_problem,
@@ -69,8 +70,7 @@ def predict(
         samples = pd.read_csv(Path(run_dir) / "samples.csv")[names].to_numpy()
         noise = np.array([post["noise_model"][c]["residual_rms"] for c in prob.channels])
         q = predictive_band(jax.random.key(seed), prob, samples[:draws], noise, effects)
-        inside = (prob.y >= q["q05"]) & (prob.y <= q["q95"])
-        coverage = {c: float(inside[..., i][mask].mean()) for i, c in enumerate(prob.channels)}
+        coverage = band_coverage(prob, q, mask)
     w_idx, k_idx = np.nonzero(mask)
     cols = {"t": prob.t_out[w_idx, k_idx], "window": w_idx}
     for i, c in enumerate(prob.channels):
