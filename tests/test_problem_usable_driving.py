@@ -1,10 +1,12 @@
 """The driving that informs the lateral dynamics is used, in the car's own terms; straights are not."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
 from vdsbi.io import build_recording, find_segments, min_window
-from vdsbi.problem import ProblemSettings, make_problem
+from vdsbi.problem import ProblemSettings, lateral_information_share, make_problem
 from vdsbi.simulator import CHANNELS, Inputs, default_vehicle, simulate, theta_from_dict
 
 #: A stiff, slightly understeering car: at 30 m/s a quarter of the seed profile's 0.05 rad of
@@ -74,6 +76,8 @@ def test_steady_cornering_with_little_steer_is_used_in_full_and_a_straight_is_dr
     )
     summary = prob.summary()
     assert summary["train_seconds"] + summary["held_out_seconds"] > 40.0
+    # The dropped straight carries no lateral information; the windows carry nearly all of it.
+    assert 0.97 < summary["lateral_information_share"] <= 1.0
 
 
 def test_a_short_corner_is_its_own_window_and_a_blip_is_too_short():
@@ -114,3 +118,14 @@ def test_a_noisy_lateral_channel_raises_the_bar_above_the_floor():
     noisy = build_recording(noisy_cols, "noisy.csv")
     assert any(s.usable for s in find_segments(clean))
     assert not any(s.usable for s in find_segments(noisy))
+
+
+def test_lateral_information_share_counts_the_squared_lateral_activity_inside_the_pieces():
+    t = np.arange(0.0, 10.0, 0.01)
+    rec = SimpleNamespace(t=t)
+    activity = np.where(t < 5.0, 1.0, 3.0)  # 5 s at 1 m/s², 5 s at 3 m/s²: energies 1 : 9
+    assert lateral_information_share(rec, [(5.0, 10.0)], activity) == pytest.approx(0.9, abs=0.01)
+    assert lateral_information_share(rec, [(0.0, 10.0)], activity) == pytest.approx(1.0)
+    assert lateral_information_share(rec, [], activity) == 0.0
+    assert lateral_information_share(rec, [(0.0, 10.0)], np.zeros_like(t)) is None
+    assert lateral_information_share(rec, [(0.0, 10.0)], None) is None

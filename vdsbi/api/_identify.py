@@ -333,6 +333,11 @@ def _describe(prob: Problem, full: Problem, say: Callable[[str], None]) -> None:
         f"validated: fitted {info['train_seconds']:.1f} s, held out {info['held_out_seconds']:.1f} s; "
         f"estimate: fitted on all {full.summary()['train_seconds']:.1f} s"
     )
+    share = full.description.get("lateral_information_share")  # a list over several recordings
+    shares = [s for s in (share if isinstance(share, list) else [share]) if s is not None]
+    if shares:
+        text = " / ".join(f"{s:.0%}" for s in shares)
+        say(f"the windows carry {text} of the drive's lateral information (Σ a_lat²)")
     for w in prob.warnings:
         say(f"warning: {w}")
 

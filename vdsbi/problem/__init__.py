@@ -38,4 +38,8 @@ from ._validate import (
     predictive_band as predictive_band,
     validate as validate,
 )
-from ._windows import Window as Window, choose_windows as choose_windows
+from ._windows import (
+    Window as Window,
+    choose_windows as choose_windows,
+    lateral_information_share as lateral_information_share,
+)

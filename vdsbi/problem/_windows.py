@@ -63,6 +63,25 @@ def lateral_activity(rec: Recording, wheel_radius: float) -> np.ndarray | None:
     return np.maximum.reduce(parts) if parts else None
 
 
+def lateral_information_share(rec: Recording, pieces, activity: np.ndarray | None) -> float | None:
+    """Share of the drive's Σ a_lat² (`lateral_activity` squared) inside `pieces` ((t0, t1) s).
+
+    In steady cornering a tyre's slip angle, and so the lateral channels' sensitivity to its
+    cornering stiffness, is proportional to the lateral acceleration: with a constant noise,
+    this is the share of the stiffnesses' Fisher information the windows carry. None without
+    a lateral channel or with no lateral motion at all."""
+    if activity is None:
+        return None
+    energy = activity**2
+    total = float(energy.sum())
+    if not total > 0.0:
+        return None
+    inside = np.zeros(len(energy), dtype=bool)
+    for a, b in pieces:
+        inside |= (rec.t >= a - 1e-9) & (rec.t <= b + 1e-9)
+    return float(energy[inside].sum()) / total
+
+
 def _quiet_edges(rec: Recording, pieces, activity: np.ndarray, max_window: float):
     """Move each window start (and the matching end) to the quietest moment within
     ±EDGE_SEARCH·max_window: a window starting near straight running has a well-estimated
@@ -117,7 +136,8 @@ def choose_windows(
         windows in time order, and a description: "usable" [[t0, t1]], "rejected"
         [[t0, t1, reason]], "stretches" [[t0, t1, "kept: …" or "dropped: …"]] (the whole drive
         in time order, with the figure that decided), "seconds" {"drive", "in_windows",
-        "dropped"}, and "how".
+        "dropped"}, "lateral_information_share" (`lateral_information_share`, absent without
+        lateral channels) and "how".
     """
     longest = min(max_window, 0.9 * rec.duration)
     segs = find_segments(
@@ -160,6 +180,9 @@ def choose_windows(
         "in_windows": round(in_windows, 2),
         "dropped": round(rec.duration - in_windows, 2),
     }
+    share = lateral_information_share(rec, pieces, lateral_activity(rec, wheel_radius))
+    if share is not None:
+        described["lateral_information_share"] = round(share, 4)
     if held_out == 0.0:
         windows = [Window(a, b, "train") for a, b in pieces]
         how = f"{len(windows)} window(s) of <= {max_window:g} s over the usable driving; none held out"
