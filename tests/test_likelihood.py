@@ -2,6 +2,7 @@
 Laplace covariance."""
 
 import numpy as np
+import pytest
 
 from vdsbi.diagnostics import fit_likelihood
 from vdsbi.io import build_recording
@@ -69,3 +70,37 @@ def test_a_model_error_widens_the_interval_by_its_own_scale_and_correlation(x64)
     assert np.all(late.noise.model_error_ratio > 3.0 * clean.noise.model_error_ratio)
     i = [PARAM_NAMES.index(n) for n in free]
     assert np.all(np.sqrt(np.diag(late.cov_z))[i] > 3.0 * np.sqrt(np.diag(clean.cov_z))[i])
+
+
+def _halves(rng, shift, prec):
+    # A linear model whitened by its noise, two halves of different excitation; half A's first
+    # coefficient is moved by `shift` (what an effect the model lacks does to one half).
+    n, theta = 400, np.array([0.5, -0.3, 0.2])
+    half = np.arange(n) < n // 2
+    x = rng.standard_normal((n, 3)) * np.where(half, 1.0, 2.0)[:, None]
+    y = x @ theta + np.where(half, shift, 0.0) * x[:, 0] + rng.standard_normal(n)
+    h = x.T @ x + np.diag(prec)
+    z = np.linalg.solve(h, x.T @ y)
+    exact = [np.linalg.solve(x[m].T @ x[m] + np.diag(prec / 2), x[m].T @ y[m]) for m in (half, ~half)]
+    args = (np.linalg.inv(h), x[None, :, None, :], (x @ z - y)[None, :, None], z, prec)
+    return args, [("first against second half", half[None, :, None])], exact[0] - exact[1]
+
+
+def test_halves_that_share_one_theta_rarely_widen_and_a_moved_half_is_caught():
+    from vdsbi.diagnostics._likelihood import JOINT_LEVEL, _consistent
+
+    rng = np.random.default_rng(0)
+    prec = np.full(3, 5.0)  # a prior strong enough that leaving its gradient out would show
+    rejected = 0
+    for _ in range(300):
+        args, splits, _ = _halves(rng, 0.0, prec)
+        cov, shifts, joint = _consistent(*args, splits)
+        rejected += joint is not None
+        if joint is None and not shifts:
+            np.testing.assert_array_equal(cov, args[0])  # consistent halves leave it as it was
+    assert abs(rejected / 300 - (1 - JOINT_LEVEL)) < 0.03  # the test's level under a right model
+    args, splits, exact = _halves(rng, 0.4, prec)
+    cov, shifts, joint = _consistent(*args, splits)
+    assert joint is not None and joint["scale"] == joint["D2"] / 3 > 1.0
+    assert list(shifts) == [0] and shifts[0]["z_shift"] == pytest.approx(abs(exact[0]), rel=1e-6)
+    assert np.all(np.diag(cov) > joint["scale"] * np.diag(args[0]) - 1e-12)

@@ -448,6 +448,13 @@ def _summary(full: Problem, samples, fit, state, run_info: dict, box: Box, effec
             "method": "best fit of all the usable driving through the simulator (maximum a posteriori "
             "under the noise model below); the reported posterior is the Laplace approximation there",
             "converged": fit.converged,
+            "halves_disagree": None
+            if fit.inconsistency is None
+            else fit.inconsistency
+            | {
+                "what": "two halves of the data cannot share one θ (D² of their difference beyond "
+                "χ²'s 95 % point): the model lacks something, and the covariance is scaled by D²/P"
+            },
         },
         "noise_model": fit.noise.to_dict(),
         "not_identified": [n for n in names if params[n]["identified"] is False],

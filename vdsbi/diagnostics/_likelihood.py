@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
+from scipy.stats import chi2
 
 from ..problem import (
     Box,
@@ -101,6 +102,8 @@ class LikelihoodPosterior(eqx.Module):
         disagreement: {name: {"split", "z_shift"}} for parameters on which two halves of the data
             (`_splits`) disagree beyond their uncertainty: the model lacks something that moves
             them, and their variance was widened by the disagreement (`_consistent`).
+        inconsistency: {"split", "D2", "scale"} when two halves of the data cannot share one θ
+            (`_consistent`): the covariance was scaled by "scale"; None when they can.
     """
 
     box: Box
@@ -111,6 +114,7 @@ class LikelihoodPosterior(eqx.Module):
     converged: bool
     steps: tuple[int, ...]
     disagreement: dict = eqx.field(default_factory=dict)
+    inconsistency: dict | None = None
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -207,14 +211,16 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, solver)
     cov_free = _robust(cov_free, jac, resid / scale, mask, prec, BLOCK_TAUS * float(tau.max()))
     splits = _splits(data, mask)
     root_tau = np.sqrt(tau)
-    cov_free, shifts = _consistent(cov_free, jac / root_tau[:, None], resid / scale / root_tau, prec, splits)
+    cov_free, shifts, joint = _consistent(
+        cov_free, jac / root_tau[:, None], resid / scale / root_tau, np.asarray(z), prec, splits
+    )
     cov = np.diag(np.full(len(names), PRIOR_Z_STD**2))
     cov[np.ix_(idx, idx)] = cov_free
     z_all = z0.copy()
     z_all[idx] = np.asarray(z)
     noise = NoiseModel(data.channels, scale, tau, sensor, mask.sum() * np.ones_like(scale))
     disagree = {free[i]: v for i, v in shifts.items()}
-    return LikelihoodPosterior(box, z_all, cov, free, noise, converged, tuple(steps), disagree)
+    return LikelihoodPosterior(box, z_all, cov, free, noise, converged, tuple(steps), disagree, joint)
 
 
 #: Blocks of the robust covariance span this many autocorrelation times.
@@ -258,6 +264,9 @@ def _robust(cov: np.ndarray, jac: np.ndarray, r: np.ndarray, mask: np.ndarray, p
 #: Two halves of the data disagree on a parameter when their estimates differ by more than this
 #: many standard deviations of the difference.
 DISAGREE_Z = 2.0
+#: ... and on θ as a whole when the squared Mahalanobis distance of their difference exceeds this
+#: quantile of χ²_P.
+JOINT_LEVEL = 0.95
 
 
 def _splits(data: Problem, mask: np.ndarray) -> list[tuple[str, np.ndarray]]:
@@ -282,37 +291,55 @@ def _splits(data: Problem, mask: np.ndarray) -> list[tuple[str, np.ndarray]]:
     return out
 
 
-def _consistent(cov: np.ndarray, jac: np.ndarray, r: np.ndarray, prec, splits) -> tuple[np.ndarray, dict]:
-    """`cov` widened where halves of the data disagree: each half's estimate is one Newton step
-    from the joint fit (z_A = ẑ − H_A⁻¹g_A, each half with half the prior), and a parameter whose
-    halves differ by d with |d| > `DISAGREE_Z`·sd(d) gets d² added to its variance (a systematic
-    error of the size the halves reveal), the largest over the splits.
+def _consistent(cov: np.ndarray, jac: np.ndarray, r: np.ndarray, z: np.ndarray, prec, splits):
+    """`cov` widened where halves of the data disagree.
+
+    Each half's estimate is one Newton step from the joint fit ẑ, each half with half the prior:
+    z_A = ẑ − H_A⁻¹(g_A + ½·prec·ẑ), H_A = J_AᵀJ_A + ½·prec, Σ_A = H_A⁻¹. With d = z_A − z_B:
+    - jointly: when D² = dᵀ(Σ_A + Σ_B)⁻¹d exceeds χ²_P's `JOINT_LEVEL` point the halves cannot
+      share one θ; the covariance is scaled by D²/P (Birge's ratio, the Particle Data Group's
+      scale factor for inconsistent measurements);
+    - per parameter: one whose halves differ by |d_i| > `DISAGREE_Z`·sd(d_i) gets d_i² added to
+      its variance (a systematic error of the size the halves reveal) and is reported as moved
+      by model error.
+    The largest of each over the splits.
 
     Args:
         cov: (P, P) covariance so far.
         jac: (W, K, C, P) Jacobian of the residuals whitened by their full per-sample std.
         r: (W, K, C) those residuals.
+        z: (P,) the joint fit.
         prec: (P,) prior precision.
         splits: `_splits`.
+
+    Returns:
+        the widened covariance, {parameter index: {"split", "z_shift", "sigmas"}} and
+        {"split", "D2", "scale"} of the largest joint disagreement (None when no split rejects).
     """
-    extra, shifts = np.zeros(len(prec)), {}
+    prec = np.asarray(prec)
+    extra, shifts, joint = np.zeros(len(prec)), {}, None
     for name, half in splits:
-        est, var = [], []
+        est, covs = [], []
         for m in (half, ~half):
             j = np.where(m[..., None], jac, 0.0).reshape(-1, jac.shape[-1])
-            g = j.T @ np.where(m, r, 0.0).ravel()
-            h_inv = np.linalg.pinv(j.T @ j + np.diag(0.5 * np.asarray(prec)))
+            g = j.T @ np.where(m, r, 0.0).ravel() + 0.5 * prec * z
+            h_inv = np.linalg.pinv(j.T @ j + np.diag(0.5 * prec))
             est.append(-h_inv @ g)
-            var.append(np.diag(h_inv))
-        d = est[0] - est[1]
-        sd = np.sqrt(var[0] + var[1])
+            covs.append(h_inv)
+        d, s_d = est[0] - est[1], covs[0] + covs[1]
+        d2 = float(d @ np.linalg.pinv(s_d) @ d)
+        if d2 > chi2.ppf(JOINT_LEVEL, len(d)) and (joint is None or d2 > joint["D2"]):
+            joint = {"split": name, "D2": d2, "scale": d2 / len(d)}
+        sd = np.sqrt(np.diag(s_d))
         for i in np.flatnonzero(np.abs(d) > DISAGREE_Z * sd):
             if d[i] ** 2 > extra[i]:
                 extra[i] = d[i] ** 2
                 sigmas = abs(float(d[i] / sd[i]))
                 shifts[int(i)] = {"split": name, "z_shift": abs(float(d[i])), "sigmas": sigmas}
+    if joint is not None:
+        cov = cov * joint["scale"]
     factor = np.sqrt((np.diag(cov) + extra) / np.diag(cov))
-    return cov * np.outer(factor, factor), shifts
+    return cov * np.outer(factor, factor), shifts, joint
 
 
 @eqx.filter_jit
