@@ -116,7 +116,9 @@ def markdown(rows: list[dict], seconds: float) -> str:
         parts = []
         for n, p in r["parameters"].items():
             mark = "" if p["inside"] else (" (flagged)" if p["flagged"] else " ✗")
-            parts.append(f"{n} {p['estimate']:.4g} [{p['q025']:.4g}, {p['q975']:.4g}] vs {p['truth']:.4g}{mark}")
+            parts.append(
+                f"{n} {p['estimate']:.4g} [{p['q025']:.4g}, {p['q975']:.4g}] vs {p['truth']:.4g}{mark}"
+            )
         L.append(f"- {r['kind']} #{r['case']}: " + "; ".join(parts))
     return "\n".join(L) + "\n"
 
@@ -145,7 +147,12 @@ def main(argv=None) -> int:
         for i, kind in cases:
             rows.append(one(i, kind, args.seed, duration, Path(tmp), budget))
             p = rows[-1]["parameters"]
-            print(kind, i, {m: (round(v["estimate"], 4), v["inside"], v["flagged"]) for m, v in p.items()}, flush=True)
+            print(
+                kind,
+                i,
+                {m: (round(v["estimate"], 4), v["inside"], v["flagged"]) for m, v in p.items()},
+                flush=True,
+            )
     if args.rows is not None:
         args.rows.write_text(json.dumps(rows, indent=2) + "\n")
         return 0

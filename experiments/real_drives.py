@@ -3,6 +3,9 @@ scored on the rest against the hand-written least-squares fit.
 
     python experiments/real_drives.py [--quick] [--drives NAME ...] [--sims N] [--rounds N]
 
+Besides every drive, `STRESS` variants of a shared drive as unseen cars come (sampled at 25 Hz,
+the steer logged 0.2 s before the car responds).
+
 Protocol, per drive (torque columns dropped: the longitudinal motion follows the measured speed,
 as for most real logs): `vdsbi.api.identify` with its defaults on the first 70 % of the
 recording; the rest is cut into the same 10-s windows (5 Hz low-pass, each window from its own
@@ -52,6 +55,10 @@ REFERENCE = {
 }
 CHANNELS = ("yaw_rate", "ay")
 TRAIN_FRACTION = 0.7
+#: Stress variants of a shared drive, as the unseen cars come: name -> (drive, rate Hz, steer lag s).
+#: The recording is sampled at `rate` (every n-th row) and its steer advanced by `lag`, so the car
+#: responds `lag` s after the logged steer.
+STRESS = {"vw_gti_high_speed_2 @ 25 Hz, steer 0.2 s early": ("vw_gti_high_speed_2", 25.0, 0.2)}
 
 
 def reference(name: str) -> dict:
@@ -60,7 +67,9 @@ def reference(name: str) -> dict:
 
 def without_torques(rec, t0: float, t1: float):
     part = rec.slice(t0, t1)
-    return build_recording({"t": part.t, "steer": part.steer, **part.channels}, f"{rec.source} [{t0:.1f}, {t1:.1f}] s")
+    return build_recording(
+        {"t": part.t, "steer": part.steer, **part.channels}, f"{rec.source} [{t0:.1f}, {t1:.1f}] s"
+    )
 
 
 def nrmse(problem, pred, mask) -> dict[str, float]:
@@ -74,7 +83,9 @@ def baseline(train, test, ref: dict, delays) -> dict:
     passed through the problem's filter; the steer delay chosen from `delays` by the training cost."""
     import jax
 
-    car = linear_baseline.Car(train.vehicle.mass, ref["l_f"], train.vehicle.wheelbase - ref["l_f"], ref["I_z"])
+    car = linear_baseline.Car(
+        train.vehicle.mass, ref["l_f"], train.vehicle.wheelbase - ref["l_f"], ref["I_z"]
+    )
     step = max(1, int(round(0.02 / train.dt)))  # the baseline integrates at 50 Hz
 
     def windows(p, mask, d):
@@ -94,7 +105,9 @@ def baseline(train, test, ref: dict, delays) -> dict:
 
     best = None
     for d in delays:
-        wins = [(t, v, s, *targets(train, train.train, w, t)) for w, t, v, s in windows(train, train.train, d)]
+        wins = [
+            (t, v, s, *targets(train, train.train, w, t)) for w, t, v, s in windows(train, train.train, d)
+        ]
         cf, cr = linear_baseline.fit(car, wins)
         cost = 0.0
         for t, v, s, r, ay in wins:
@@ -114,14 +127,38 @@ def baseline(train, test, ref: dict, delays) -> dict:
     return {"C_alpha_f": cf, "C_alpha_r": cr, "delay": d, "nrmse": nrmse(test, pred, test.train)}
 
 
+def stressed(rec, rate: float, lag: float):
+    """`rec` sampled at `rate` Hz with its steer advanced by `lag` s (the last `lag` s hold the
+    last value)."""
+    step = max(1, int(round(1.0 / (rate * rec.dt))))
+    steer = np.interp(rec.t + lag, rec.t, rec.steer)
+    cols = {"t": rec.t, "steer": steer, **rec.channels}
+    if rec.has_torques:
+        cols |= {"torque_front": rec.torque_front, "torque_rear": rec.torque_rear}
+    return build_recording(
+        {k: v[::step] for k, v in cols.items()}, f"{rec.source} ({rate:g} Hz, steer {lag:g} s early)"
+    )
+
+
 def run_one(name: str, args, out: Path) -> dict:
     import jax
 
-    rec, veh = load_drive(args.real / name / "recording.csv", args.real / name / "vehicle.json")
+    drive, rate, lag = STRESS.get(name, (name, None, 0.0))
+    rec, veh = load_drive(args.real / drive / "recording.csv", args.real / drive / "vehicle.json")
+    if rate is not None:
+        rec = stressed(rec, rate, lag)
     cut = rec.t[0] + TRAIN_FRACTION * rec.duration
     first, rest = without_torques(rec, rec.t[0], cut), without_torques(rec, cut, rec.t[-1])
     t0 = time.perf_counter()
-    res = api.identify(first, veh, rounds=args.rounds, sims=args.sims, seed=0, out_dir=out / name, log=print)
+    res = api.identify(
+        first,
+        veh,
+        rounds=args.rounds,
+        sims=args.sims,
+        seed=0,
+        out_dir=out / name.split()[0] / str(rate),
+        log=print,
+    )
     wall = time.perf_counter() - t0
     s = res.summary
     names, effects = list(s["parameters"]), tuple(s["effects"])
@@ -136,7 +173,9 @@ def run_one(name: str, args, out: Path) -> dict:
     row = {
         "drive": name,
         "seconds": {"drive": round(rec.duration, 1), "identify_on": round(first.duration, 1)},
-        "used": {k: s["problem"].get(k) for k in ("train_seconds", "held_out_seconds")},
+        "used": {
+            k: s["problem"].get(k) for k in ("train_seconds", "held_out_seconds", "lateral_information_share")
+        },
         "test_seconds": round(float(test.train.sum()) * test.compared_dt, 1),
         "wall_s": round(wall, 1),
         "effects": list(effects),
@@ -184,17 +223,34 @@ def markdown(rows: list[dict]) -> str:
             f"{f(r['ls']['nrmse'], 'yaw_rate')} / {f(r['ls']['nrmse'], 'ay')} | "
             f"{f(r['ls_delay']['nrmse'], 'yaw_rate')} / {f(r['ls_delay']['nrmse'], 'ay')} "
             f"(d = {r['ls_delay']['delay']:.2f} s) | {pct(cov.get('yaw_rate'))} / {pct(cov.get('ay'))} | {lf_txt} | "
-            f"{us['median']:.2f} [{us['q025']:.2f}, {us['q975']:.2f}] | {r['wall_s']:.0f} |"
+            f"{us['median']:.2f} [{us['q025']:.2f}, {us['q975']:.2f}]"
+            f"{'' if us.get('identified', True) else ' (not identified)'} | {r['wall_s']:.0f} |"
         )
     L.append("")
     for r in rows:
         L.append(f"## {r['drive']}")
         L.append("")
-        L.append(f"effects: {', '.join(r['effects']) or 'none'}; not identified: {', '.join(r['not_identified']) or 'none'}")
+        L.append(
+            f"effects: {', '.join(r['effects']) or 'none'}; not identified: {', '.join(r['not_identified']) or 'none'}"
+        )
+        L.append("")
+        u = r["used"]
+        share = u.get("lateral_information_share")
+        L.append(
+            f"identify fitted {u['train_seconds']} s, held out {u['held_out_seconds']} s of the first 70 % "
+            f"({r['seconds']['identify_on']} s)"
+            + (
+                ""
+                if share is None
+                else f"; the windows carry {share:.0%} of its lateral information (Σ a_lat²)"
+            )
+        )
         L.append("")
         L.append("estimate: " + ", ".join(f"{k} {v:.4g}" for k, v in r["estimate"].items()))
         g = r["combinations"]["yaw_rate_gain"]
-        L.append(f"; yaw-rate gain at {g['at']} m/s: {g['median']:.3f} [{g['q025']:.3f}, {g['q975']:.3f}] 1/s")
+        L.append(
+            f"; yaw-rate gain at {g['at']} m/s: {g['median']:.3f} [{g['q025']:.3f}, {g['q975']:.3f}] 1/s"
+        )
         L.append("")
         npe = r["npe_check"]
         L.append(
@@ -219,10 +275,14 @@ def main(argv=None) -> int:
     ap.add_argument("--drives", nargs="*", default=None)
     ap.add_argument("--sims", type=int, default=None)
     ap.add_argument("--rounds", type=int, default=None)
-    ap.add_argument("--out", type=Path, default=None, help="folder for identify's runs (default: a temporary one)")
+    ap.add_argument(
+        "--out", type=Path, default=None, help="folder for identify's runs (default: a temporary one)"
+    )
     ap.add_argument("--real", type=Path, default=REAL, help="folder of drives (default ../shared/real)")
     ap.add_argument("--rows", type=Path, default=None, help="write the rows here (JSON) and stop")
-    ap.add_argument("--merge", type=Path, nargs="*", default=None, help="tabulate rows written by --rows runs")
+    ap.add_argument(
+        "--merge", type=Path, nargs="*", default=None, help="tabulate rows written by --rows runs"
+    )
     args = ap.parse_args(argv)
     if args.merge is not None:
         rows = [r for f in args.merge for r in json.loads(f.read_text())]
@@ -230,7 +290,10 @@ def main(argv=None) -> int:
         (RESULTS / "real_drives.md").write_text(markdown(rows))
         print(markdown(rows))
         return 0
-    drives = args.drives or sorted(p.name for p in args.real.iterdir() if (p / "recording.csv").is_file())
+    drives = args.drives or [
+        *sorted(p.name for p in args.real.iterdir() if (p / "recording.csv").is_file()),
+        *(k for k, (d, _, _) in STRESS.items() if (args.real / d / "recording.csv").is_file()),
+    ]
     if args.quick:
         drives = args.drives or ["comma_rav4"]
         args.sims, args.rounds = args.sims or 300, args.rounds or 1

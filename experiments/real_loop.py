@@ -39,7 +39,9 @@ RESULTS = Path(__file__).parent / "results"
 def lagged(rec, lag: float):
     """`rec` with its steer advanced by `lag` s (the last `lag` s hold the last value)."""
     steer = np.interp(rec.t + lag, rec.t, rec.steer)
-    return build_recording({"t": rec.t, "steer": steer, **rec.channels}, f"{rec.source} (steer {lag:g} s early)")
+    return build_recording(
+        {"t": rec.t, "steer": steer, **rec.channels}, f"{rec.source} (steer {lag:g} s early)"
+    )
 
 
 def score(res, test) -> dict:

@@ -77,3 +77,20 @@ def test_understeer_gradient_and_yaw_gain_follow_the_single_track_formulas():
     assert vehicle_combinations(neutral, names, veh, 20.0)["understeer_gradient"]["median"] == pytest.approx(
         0.0, abs=1e-9
     )
+
+
+def test_a_combination_is_identified_when_the_draws_narrow_it_well_below_the_prior():
+    veh = default_vehicle()
+    names = ("l_f", "h_cog", "C_kappa_f", "C_kappa_r", "C_alpha_f", "C_alpha_r")
+    rng = np.random.default_rng(0)
+    prior = rng.uniform([1.0, 0.3, 5e4, 5e4, 3e4, 3e4], [1.6, 0.7, 2e5, 2e5, 2e5, 2e5], (4000, 6))
+    # Stiffnesses spread over their prior but tied in ratio: the understeer gradient is fixed
+    # (to the extent l_f is), each stiffness is not.
+    tied = prior.copy()
+    tied[:, 0] = 1.3 + 0.01 * rng.standard_normal(4000)
+    tied[:, 5] = tied[:, 4] * 1.1
+    out = vehicle_combinations(tied, names, veh, 20.0, prior)
+    assert out["understeer_gradient"]["identified"] and out["understeer_gradient"]["std_ratio_to_prior"] < 0.5
+    same = vehicle_combinations(prior, names, veh, 20.0, prior)
+    assert not same["understeer_gradient"]["identified"] and not same["yaw_rate_gain"]["identified"]
+    assert "identified" not in vehicle_combinations(prior, names, veh, 20.0)["understeer_gradient"]

@@ -87,9 +87,10 @@ class IdentifyResult:
             if key == "determined_directions":
                 continue
             at = f" at {c['at']} m/s" if c.get("at") else ""
+            told = "" if c.get("identified", True) else " (not identified: near its prior spread)"
             rows.append(
                 f"{key.replace('_', ' ')}{at}: {c['median']:.4g} {c['unit']} "
-                f"[95 %: {c['q025']:.4g} .. {c['q975']:.4g}]"
+                f"[95 %: {c['q025']:.4g} .. {c['q975']:.4g}]{told}"
             )
         rows += [f"WARNING: {w['message']}" for w in self.summary.get("warnings", ())]
         return "\n".join(rows)
@@ -458,7 +459,7 @@ def _summary(full: Problem, samples, fit, state, run_info: dict, box: Box, effec
         },
         "noise_model": fit.noise.to_dict(),
         "not_identified": [n for n in names if params[n]["identified"] is False],
-        "combinations": vehicle_combinations(samples, names, veh, rms_speed)
+        "combinations": vehicle_combinations(samples, names, veh, rms_speed, prior)
         | {"determined_directions": determined_directions(samples, prior, names, fit.free)},
         "effects": list(effects),
         "problem": full.summary(),

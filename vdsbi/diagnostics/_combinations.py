@@ -30,19 +30,34 @@ def _interval(x: np.ndarray) -> dict[str, float]:
 
 
 def vehicle_combinations(
-    samples: np.ndarray, names: Sequence[str], vehicle: Vehicle, speed: float
+    samples: np.ndarray,
+    names: Sequence[str],
+    vehicle: Vehicle,
+    speed: float,
+    prior_samples: np.ndarray | None = None,
 ) -> dict[str, dict]:
     """Understeer gradient (deg/g) and steady-state yaw-rate gain at `speed` (1/s) over (N, P)
-    posterior draws, with 95 % intervals."""
+    posterior draws, with 95 % intervals; with `prior_samples` each also says whether the drive
+    determines it (`identified`: posterior std at most `DETERMINED_RATIO` of the prior's, the
+    rule single parameters and directions follow)."""
+    post = _combinations(samples, names, vehicle, speed)
+    prior = None if prior_samples is None else _combinations(prior_samples, names, vehicle, speed)
+    out = {}
+    kinds = (("understeer_gradient", "deg/g", None), ("yaw_rate_gain", "1/s", round(float(speed), 2)))
+    for key, unit, at in kinds:
+        out[key] = {"unit": unit, "at": at} | _interval(post[key])
+        if prior is not None:
+            ratio = float(np.std(post[key]) / np.std(prior[key]))
+            out[key] |= {"std_ratio_to_prior": ratio, "identified": ratio <= DETERMINED_RATIO}
+    return out
+
+
+def _combinations(samples: np.ndarray, names: Sequence[str], vehicle: Vehicle, speed: float) -> dict:
     idx = {n: names.index(n) for n in ("l_f", "C_alpha_f", "C_alpha_r")}
     lf, cf, cr = (samples[:, idx[n]] for n in ("l_f", "C_alpha_f", "C_alpha_r"))
     m, L = vehicle.mass, vehicle.wheelbase
     k = (m / L) * ((L - lf) / cf - lf / cr)  # rad / (m/s²)
-    gain = speed / (L + k * speed**2)
-    return {
-        "understeer_gradient": {"unit": "deg/g", "at": None} | _interval(np.degrees(k) * GRAVITY),
-        "yaw_rate_gain": {"unit": "1/s", "at": round(float(speed), 2)} | _interval(gain),
-    }
+    return {"understeer_gradient": np.degrees(k) * GRAVITY, "yaw_rate_gain": speed / (L + k * speed**2)}
 
 
 def determined_directions(
