@@ -20,7 +20,7 @@ import numpy as np
 from ..diagnostics import Localisation, MisspecificationTest, locate_mismatch, misspecification_test
 from ..io import Recording, read_recording, read_vehicle
 from ..problem import Box, Problem, ProblemSettings, longitudinal_mode, make_problem
-from ..simulator import PARAM_NAMES, Vehicle
+from ..simulator import PARAM_NAMES, SpeedDriven, Vehicle, model_class
 from ._candidates import effect_space, label
 from ._data import compared_inputs, held_out_scores
 from ._fit import Fitter
@@ -101,7 +101,7 @@ class _Decision(NamedTuple):
 
 
 def _cut_windows(recording: Recording, vehicle: Vehicle, s: DiagnoseSettings, say) -> Problem:
-    speed = longitudinal_mode(recording, s.longitudinal) == "speed"
+    speed = issubclass(model_class(longitudinal_mode(recording, s.longitudinal)), SpeedDriven)
     settings = ProblemSettings(
         longitudinal=s.longitudinal,
         max_window=s.max_window or (10.0 if speed else 20.0),

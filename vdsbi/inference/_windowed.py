@@ -10,7 +10,7 @@ import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..problem import Problem, simulate_draws, split_parameters, windowed_model
-from ..simulator import Solver
+from ..simulator import Solver, SpeedDriven
 from ._apt_state import APTState
 from ._posterior import Posterior
 from ._prior import BoxPrior
@@ -20,7 +20,7 @@ from ._vehicle import IdentifySettings, fit_posterior, observation
 def input_channels(problem: Problem) -> Float[Array, "W K I"]:
     """What drives each window, on the compared samples: steer and the torques (torque mode)
     or steer and the measured speed (speed mode), filtered like the measurement."""
-    if problem.longitudinal == "speed":
+    if issubclass(problem.model_class, SpeedDriven):
         u = jnp.stack([jnp.asarray(problem.u[..., 0]), jnp.asarray(problem.speed)], axis=-1)
     else:
         u = jnp.asarray(problem.u)
@@ -66,7 +66,7 @@ def identify_problem(
     u = flatten_windows(input_channels(train)[None], mask)[0].astype(jnp.float32)
     to_x = jax.jit(jax.vmap(lambda r: observation(r, u, settings.embedding)))
     x_o = to_x(flatten_windows(jnp.asarray(train.y)[None], mask).astype(jnp.float32))[0]
-    jitter = 0.0 if train.longitudinal == "speed" else 0.2 + 0.02 * float(np.mean(train.v0))
+    jitter = 0.0 if issubclass(train.model_class, SpeedDriven) else 0.2 + 0.02 * float(np.mean(train.v0))
 
     def simulate(k, theta):
         th, ep = split_parameters(theta, effects)
