@@ -173,13 +173,12 @@ def run_one(name: str, args, out: Path) -> dict:
     row = {
         "drive": name,
         "seconds": {"drive": round(rec.duration, 1), "identify_on": round(first.duration, 1)},
-        "used": {
-            k: s["problem"].get(k) for k in ("train_seconds", "held_out_seconds", "lateral_information_share")
-        },
+        "used": {k: s["problem"].get(k) for k in ("train_seconds", "lateral_information_share")},
         "test_seconds": round(float(test.train.sum()) * test.compared_dt, 1),
         "wall_s": round(wall, 1),
         "effects": list(effects),
         "estimate": {n: float(v) for n, v in zip(names, est)},
+        "interval95": {n: [p["q025"], p["q975"]] for n, p in s["parameters"].items()},
         "ours": nrmse(test, pred, test.train) if ok else None,
         "band_coverage": band_coverage(test, band, test.train),
         "l_f": {
@@ -237,7 +236,7 @@ def markdown(rows: list[dict]) -> str:
         u = r["used"]
         share = u.get("lateral_information_share")
         L.append(
-            f"identify fitted {u['train_seconds']} s, held out {u['held_out_seconds']} s of the first 70 % "
+            f"the estimate is fitted on {u['train_seconds']} s of usable driving in the first 70 % "
             f"({r['seconds']['identify_on']} s)"
             + (
                 ""

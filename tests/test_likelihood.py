@@ -70,6 +70,9 @@ def test_a_model_error_widens_the_interval_by_its_own_scale_and_correlation(x64)
     assert np.all(late.noise.model_error_ratio > 3.0 * clean.noise.model_error_ratio)
     i = [PARAM_NAMES.index(n) for n in free]
     assert np.all(np.sqrt(np.diag(late.cov_z))[i] > 3.0 * np.sqrt(np.diag(clean.cov_z))[i])
+    # What the information alone allows is never wider than the reported posterior.
+    for post in (clean, late):
+        assert np.all(np.linalg.eigvalsh(post.cov_z - post.cov_information) > -1e-12)
 
 
 def _halves(rng, shift, prec):

@@ -417,14 +417,20 @@ def _starts(npe_samples: np.ndarray, box: Box) -> np.ndarray:
 def _summary(full: Problem, samples, fit, state, run_info: dict, box: Box, effects, veh) -> dict[str, Any]:
     """posterior.json's core: the reported posterior (the likelihood one on all the driving), the
     estimate (its best fit), the noise model, what the drive cannot inform and what it does."""
+    import jax
+
     from ..diagnostics import MAX_STD_RATIO, determined_directions, vehicle_combinations
 
     names = box.names
     bounds = {n: (float(a), float(b)) for n, a, b in zip(names, box.low, box.high)}
     params = summarise(samples, bounds, names, parameter_units(effects))
+    # Identified by what the drive informs (before model error widens the interval: a parameter
+    # the data pin down stays identified, with an interval that says the model misses something).
+    informed = np.asarray(fit.sample(jax.random.key(2), len(samples), information_only=True), float)
+    informed_std = np.std(informed, axis=0)
     for i, n in enumerate(names):
         prior_std = float(box.width[i]) / np.sqrt(12.0)
-        ratio = params[n]["std"] / prior_std
+        ratio = float(informed_std[i]) / prior_std
         params[n]["estimate"] = float(fit.theta[i])
         params[n]["identified"] = bool(n in fit.free and ratio <= MAX_STD_RATIO)
         if n not in fit.free:
@@ -459,7 +465,7 @@ def _summary(full: Problem, samples, fit, state, run_info: dict, box: Box, effec
         },
         "noise_model": fit.noise.to_dict(),
         "not_identified": [n for n in names if params[n]["identified"] is False],
-        "combinations": vehicle_combinations(samples, names, veh, rms_speed, prior)
+        "combinations": vehicle_combinations(samples, names, veh, rms_speed, prior, informed)
         | {"determined_directions": determined_directions(samples, prior, names, fit.free)},
         "effects": list(effects),
         "problem": full.summary(),

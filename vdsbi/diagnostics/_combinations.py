@@ -35,19 +35,22 @@ def vehicle_combinations(
     vehicle: Vehicle,
     speed: float,
     prior_samples: np.ndarray | None = None,
+    informed_samples: np.ndarray | None = None,
 ) -> dict[str, dict]:
     """Understeer gradient (deg/g) and steady-state yaw-rate gain at `speed` (1/s) over (N, P)
     posterior draws, with 95 % intervals; with `prior_samples` each also says whether the drive
-    determines it (`identified`: posterior std at most `DETERMINED_RATIO` of the prior's, the
-    rule single parameters and directions follow)."""
+    determines it (`identified`: std at most `DETERMINED_RATIO` of the prior's, the rule single
+    parameters and directions follow), read from `informed_samples` where given (draws of what
+    the drive's information alone allows, before model error widens the posterior)."""
     post = _combinations(samples, names, vehicle, speed)
+    told = post if informed_samples is None else _combinations(informed_samples, names, vehicle, speed)
     prior = None if prior_samples is None else _combinations(prior_samples, names, vehicle, speed)
     out = {}
     kinds = (("understeer_gradient", "deg/g", None), ("yaw_rate_gain", "1/s", round(float(speed), 2)))
     for key, unit, at in kinds:
         out[key] = {"unit": unit, "at": at} | _interval(post[key])
         if prior is not None:
-            ratio = float(np.std(post[key]) / np.std(prior[key]))
+            ratio = float(np.std(told[key]) / np.std(prior[key]))
             out[key] |= {"std_ratio_to_prior": ratio, "identified": ratio <= DETERMINED_RATIO}
     return out
 

@@ -94,7 +94,10 @@ class LikelihoodPosterior(eqx.Module):
     Attributes:
         box: the prior box (names, bounds, bijection).
         z: (P,) the best fit (MAP) in logit coordinates.
-        cov_z: (P, P) Laplace covariance of z; parameters not fitted keep their prior variance.
+        cov_z: (P, P) covariance of z (Laplace, widened by the model error the data reveal);
+            parameters not fitted keep their prior variance.
+        cov_information: (P, P) the same before the halves' disagreement widens it (`_consistent`):
+            what the drive's information alone allows, which the identifiability rule reads.
         free: names of the fitted parameters (the others carry no information in this drive).
         noise: the noise model the fit ended with.
         converged: the last fit stopped by its tolerance, not its iteration cap.
@@ -109,6 +112,7 @@ class LikelihoodPosterior(eqx.Module):
     box: Box
     z: np.ndarray
     cov_z: np.ndarray
+    cov_information: np.ndarray
     free: tuple[str, ...]
     noise: NoiseModel
     converged: bool
@@ -125,9 +129,11 @@ class LikelihoodPosterior(eqx.Module):
         """The best fit (MAP), in parameter units."""
         return np.asarray(self.box.from_unbounded(self.z))
 
-    def sample(self, key: PRNGKeyArray, n: int) -> Float[Array, "n P"]:
-        """`n` draws in parameter units (Gaussian in z, mapped into the box)."""
-        chol = np.linalg.cholesky(self.cov_z + 1e-12 * np.eye(len(self.z)))
+    def sample(self, key: PRNGKeyArray, n: int, *, information_only: bool = False) -> Float[Array, "n P"]:
+        """`n` draws in parameter units (Gaussian in z, mapped into the box); with
+        `information_only`, from `cov_information` (for the identifiability rule)."""
+        cov = self.cov_information if information_only else self.cov_z
+        chol = np.linalg.cholesky(cov + 1e-12 * np.eye(len(self.z)))
         eps = jax.random.normal(key, (n, len(self.z)), dtype=jnp.float32)
         z = jnp.asarray(self.z, jnp.float32) + eps @ jnp.asarray(chol.T, jnp.float32)
         return jax.vmap(self.box.from_unbounded)(z)
@@ -208,19 +214,21 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, solver)
     prec = np.full(len(idx), PRIOR_Z_STD**-2)
     flat = (jac / np.sqrt(tau)[:, None]).reshape(-1, len(idx))
     cov_free = np.asarray(laplace_covariance(jnp.asarray(flat), prec))
-    cov_free = _robust(cov_free, jac, resid / scale, mask, prec, BLOCK_TAUS * float(tau.max()))
+    informed = _robust(cov_free, jac, resid / scale, mask, prec, BLOCK_TAUS * float(tau.max()))
     splits = _splits(data, mask)
     root_tau = np.sqrt(tau)
     cov_free, shifts, joint = _consistent(
-        cov_free, jac / root_tau[:, None], resid / scale / root_tau, np.asarray(z), prec, splits
+        informed, jac / root_tau[:, None], resid / scale / root_tau, np.asarray(z), prec, splits
     )
-    cov = np.diag(np.full(len(names), PRIOR_Z_STD**2))
+    cov, cov_info = (np.diag(np.full(len(names), PRIOR_Z_STD**2)) for _ in range(2))
     cov[np.ix_(idx, idx)] = cov_free
+    cov_info[np.ix_(idx, idx)] = informed
     z_all = z0.copy()
     z_all[idx] = np.asarray(z)
     noise = NoiseModel(data.channels, scale, tau, sensor, mask.sum() * np.ones_like(scale))
     disagree = {free[i]: v for i, v in shifts.items()}
-    return LikelihoodPosterior(box, z_all, cov, free, noise, converged, tuple(steps), disagree, joint)
+    steps = tuple(steps)
+    return LikelihoodPosterior(box, z_all, cov, cov_info, free, noise, converged, steps, disagree, joint)
 
 
 #: Blocks of the robust covariance span this many autocorrelation times.
