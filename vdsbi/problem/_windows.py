@@ -162,8 +162,8 @@ def choose_windows(
         usable = [(float(rec.t[0]), float(rec.t[-1]))]
         described["how"] = "no usable stretch found: the whole recording"
     pieces = _pieces(usable, max_window)
-    activity = lateral_activity(rec, wheel_radius) if quiet_edges else None
-    if activity is not None:
+    activity = lateral_activity(rec, wheel_radius)
+    if quiet_edges and activity is not None:
         pieces = _quiet_edges(rec, pieces, activity, max_window)
     if max_windows is not None and len(pieces) > max_windows:
         chosen = sorted(sorted(pieces, key=lambda p: (-(p[1] - p[0]), p[0]))[:max_windows])
@@ -180,7 +180,7 @@ def choose_windows(
         "in_windows": round(in_windows, 2),
         "dropped": round(rec.duration - in_windows, 2),
     }
-    share = lateral_information_share(rec, pieces, lateral_activity(rec, wheel_radius))
+    share = lateral_information_share(rec, pieces, activity)
     if share is not None:
         described["lateral_information_share"] = round(share, 4)
     if held_out == 0.0:
