@@ -135,66 +135,125 @@ def find_segments(
     speed = forward_speed(rec, wheel_radius if wheel_radius is not None else FALLBACK_WHEEL_RADIUS)
     if speed is None:
         return [Segment(float(t[0]), float(t[-1]), False, "no speed: no vx, wheel speeds or estimate")]
-    n_speed = max(1, int(round(LEVEL_WINDOW * rec.rate)))
-    fast = _rolling(speed, n_speed, "mean") >= min_speed
-    lateral = lateral_level(rec, speed)
-    if lateral is None:
-        informed = np.ones(rec.num_samples, dtype=bool)
-    else:
-        level, level_noise, name = lateral
-        threshold = np.maximum(NOISE_MULTIPLE * level_noise, LATERAL_FLOOR)
-        informed = level >= threshold
-        # A corner or a transient lasts longer than the level's smoothing; shorter runs above
-        # the threshold are the noise's.
-        for i0, i1 in label_runs(informed):
-            if informed[i0] and i1 - i0 < n_speed:
-                informed[i0:i1] = False
+    n_level = max(1, int(round(LEVEL_WINDOW * rec.rate)))
+    fast = _rolling(speed, n_level, "mean") >= min_speed
     use_torques = rec.has_torques and (torques is None or torques)
+    evidence = _evidence(rec, speed, use_torques, window, min_torque_std)
+    informed = _informed(evidence, rec.num_samples, n_level, int(round(max_quiet * rec.rate)))
+    runs = _labelled_runs(t, fast, informed, exclude)
+    # Lead-ins and run-outs first (they move the bounds of the quiet runs), then the segments.
+    kept = _verdicts(rec, runs, speed, evidence, burn_in, min_duration, longest_minimum)
+    return _to_segments(t, runs, kept, evidence, min_speed, max_duration, exclude)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Evidence:
+    """Per-sample figures that decide whether the driving informs the model.
+
+    Attributes:
+        level: (T,) lateral level, m/s² (`lateral_level`), or None without ay and yaw rate.
+        noise: (T,) noise std of the level, m/s², or None.
+        threshold: (T,) level that counts as informative, m/s², or None.
+        name: the level's name, "|v·r|" or "|ay|".
+        torque_std: (T,) total axle torque std over a centred window, N·m, or None when the
+            torques do not count.
+        min_torque_std: the torque std that counts, N·m.
+    """
+
+    level: np.ndarray | None
+    noise: np.ndarray | None
+    threshold: np.ndarray | None
+    name: str
+    torque_std: np.ndarray | None
+    min_torque_std: float
+
+    def figure(self, i0: int, i1: int) -> str:
+        """The figures over samples [i0, i1) that decide, as a reason reads them."""
+        if self.level is None:
+            return "no ay or yaw rate to judge the lateral dynamics by"
+        rms = float(np.sqrt(np.mean(self.level[i0:i1] ** 2)))
+        thr = float(np.mean(self.threshold[i0:i1]))
+        noise = float(np.mean(self.noise[i0:i1]))
+        text = (
+            f"{self.name} rms {rms:.2f} m/s² = {rms / thr:.1f}× the {thr:.2f} m/s² threshold "
+            f"({LATERAL_FLOOR / GRAVITY:g} g, {NOISE_MULTIPLE:g}× noise {noise:.3f} m/s²)"
+        )
+        if self.torque_std is not None:
+            most = float(np.max(self.torque_std[i0:i1]))
+            text += f"; torque std up to {most:.0f} N·m (needs {self.min_torque_std:g})"
+        return text
+
+
+def _evidence(
+    rec: Recording, speed: np.ndarray, use_torques: bool, window: float, min_torque_std: float
+) -> _Evidence:
+    """The lateral level and its threshold (`lateral_level`), and with `use_torques` the axle
+    torque std over a centred `window` s."""
+    lateral = lateral_level(rec, speed)
+    level, noise, name = (None, None, "") if lateral is None else lateral
+    threshold = None if lateral is None else np.maximum(NOISE_MULTIPLE * noise, LATERAL_FLOOR)
+    torque_std = None
     if use_torques:
         n_win = max(2, int(round(window * rec.rate)))
         torque_std = _rolling(rec.torque_front + rec.torque_rear, n_win, "std")
-        informed = informed | (torque_std >= min_torque_std)
-    n_quiet = int(round(max_quiet * rec.rate))
+    return _Evidence(level, noise, threshold, name, torque_std, min_torque_std)
+
+
+def _informed(evidence: _Evidence, num_samples: int, n_min: int, n_quiet: int) -> np.ndarray:
+    """(T,) samples whose driving informs the model: the lateral level at its threshold for at
+    least `n_min` samples (all samples without a lateral channel), or the torque std at its
+    minimum; quiet spells of at most `n_quiet` samples between informed ones count too."""
+    if evidence.level is None:
+        informed = np.ones(num_samples, dtype=bool)
+    else:
+        informed = evidence.level >= evidence.threshold
+        # A corner or a transient lasts longer than the level's smoothing; shorter runs above
+        # the threshold are the noise's.
+        for i0, i1 in label_runs(informed):
+            if informed[i0] and i1 - i0 < n_min:
+                informed[i0:i1] = False
+    if evidence.torque_std is not None:
+        informed = informed | (evidence.torque_std >= evidence.min_torque_std)
     runs = label_runs(informed)
     for k, (i0, i1) in enumerate(runs):
         if not informed[i0] and 0 < k < len(runs) - 1 and i1 - i0 <= n_quiet:
             informed[i0:i1] = True
+    return informed
+
+
+def _labelled_runs(
+    t: np.ndarray, fast: np.ndarray, informed: np.ndarray, exclude: Sequence[tuple[float, float, str]]
+) -> list[list[int]]:
+    """[start, stop, label] of the runs of equal sample labels (`USABLE`, `SLOW`, `QUIET`, or
+    `EXCLUDED` + k inside the k-th excluded stretch), in time order."""
     label = np.where(~fast, SLOW, np.where(informed, USABLE, QUIET))
     for k, (a, b, _) in enumerate(exclude):
         label[fast & (t >= a - 1e-9) & (t <= b + 1e-9)] = EXCLUDED + k
-    runs = [[i0, i1, int(label[i0])] for i0, i1 in label_runs(label)]
+    return [[i0, i1, int(label[i0])] for i0, i1 in label_runs(label)]
 
-    def figure(i0: int, i1: int) -> str:
-        if lateral is None:
-            return "no ay or yaw rate to judge the lateral dynamics by"
-        rms = float(np.sqrt(np.mean(level[i0:i1] ** 2)))
-        thr = float(np.mean(threshold[i0:i1]))
-        noise = float(np.mean(level_noise[i0:i1]))
-        text = (
-            f"{name} rms {rms:.2f} m/s² = {rms / thr:.1f}× the {thr:.2f} m/s² threshold "
-            f"({LATERAL_FLOOR / GRAVITY:g} g, {NOISE_MULTIPLE:g}× noise {noise:.3f} m/s²)"
-        )
-        if use_torques:
-            most = float(np.max(torque_std[i0:i1]))
-            text += f"; torque std up to {most:.0f} N·m (needs {min_torque_std:g})"
-        return text
 
-    # Lead-ins and run-outs first (they move the bounds of the quiet runs), then the segments.
+def _verdicts(
+    rec: Recording,
+    runs: list[list[int]],
+    speed: np.ndarray,
+    evidence: _Evidence,
+    burn_in: float,
+    min_duration: float | None,
+    longest_minimum: float,
+) -> dict[int, tuple[bool, str]]:
+    """Index in `runs` -> (usable, reason) of each `USABLE` run, once given its lead-in and
+    run-out from the quiet runs beside it (which moves the runs' bounds, in place)."""
+    t = rec.t
     n_lead = int(round(burn_in * rec.rate))
     kept: dict[int, tuple[bool, str]] = {}
     for k, run in enumerate(runs):
-        i0, i1, code = run
-        if code != USABLE:
+        if run[2] != USABLE:
             continue
-        why = ("cornering: " if lateral is not None else "moving: ") + figure(i0, i1)
-        v = float(np.mean(np.abs(speed[i0:i1])))
+        why = ("cornering: " if evidence.level is not None else "moving: ") + evidence.figure(run[0], run[1])
+        v = float(np.mean(np.abs(speed[run[0] : run[1]])))
         prev = runs[k - 1] if k > 0 else None
         if prev is not None and prev[2] == QUIET and n_lead > 0:
-            m = min(n_lead, prev[1] - prev[0])
-            prev[1] -= m
-            run[0] -= m
-            if m:
-                why += f"; with {m * rec.dt:.1f} s lead-in"
+            why += _lead_in(rec, prev, run, n_lead)
         if min_duration is not None:
             need, how = min_duration, f"{min_duration:g} s"
         else:
@@ -205,14 +264,38 @@ def find_segments(
         if missing > 1e-9 and nxt is not None and nxt[2] == QUIET:
             # The response to the last input decays within the fitted minimum; past it the
             # straight informs nothing.
-            missing = min(missing, min_window(v, 0.0))
-            m = min(int(np.ceil(missing * rec.rate - 1e-6)), nxt[1] - nxt[0])
-            nxt[0] += m
-            run[1] += m
-            if m:
-                why += f"; with {m * rec.dt:.1f} s run-out"
+            why += _run_out(rec, run, nxt, min(missing, min_window(v, 0.0)))
         duration = float(t[run[1] - 1] - t[run[0]])
         kept[k] = (True, why) if duration >= need - 1e-9 else (False, f"too short ({duration:.1f} s < {how})")
+    return kept
+
+
+def _lead_in(rec: Recording, prev: list[int], run: list[int], n_lead: int) -> str:
+    """Move up to `n_lead` samples from the end of the quiet run `prev` to the start of `run`."""
+    m = min(n_lead, prev[1] - prev[0])
+    prev[1] -= m
+    run[0] -= m
+    return f"; with {m * rec.dt:.1f} s lead-in" if m else ""
+
+
+def _run_out(rec: Recording, run: list[int], nxt: list[int], seconds: float) -> str:
+    """Move up to `seconds` from the start of the quiet run `nxt` to the end of `run`."""
+    m = min(int(np.ceil(seconds * rec.rate - 1e-6)), nxt[1] - nxt[0])
+    nxt[0] += m
+    run[1] += m
+    return f"; with {m * rec.dt:.1f} s run-out" if m else ""
+
+
+def _to_segments(
+    t: np.ndarray,
+    runs: list[list[int]],
+    kept: dict[int, tuple[bool, str]],
+    evidence: _Evidence,
+    min_speed: float,
+    max_duration: float | None,
+    exclude: Sequence[tuple[float, float, str]],
+) -> list[Segment]:
+    """The non-empty runs as segments with their reasons; usable ones split at `max_duration`."""
     out: list[Segment] = []
     for k, (i0, i1, code) in enumerate(runs):
         if i1 <= i0:
@@ -221,7 +304,7 @@ def find_segments(
         if code == SLOW:
             out.append(Segment(a, b, False, f"speed below {min_speed:g} m/s"))
         elif code == QUIET:
-            out.append(Segment(a, b, False, f"straight: {figure(i0, i1)}"))
+            out.append(Segment(a, b, False, f"straight: {evidence.figure(i0, i1)}"))
         elif code >= EXCLUDED:
             out.append(Segment(a, b, False, exclude[code - EXCLUDED][2]))
         elif not kept[k][0] or max_duration is None or b - a <= max_duration:

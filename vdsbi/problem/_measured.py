@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..io import Recording, estimate_speed, forward_speed, running_mean
+from ..simulator import AbstractVehicleModel, SpeedDriven
 
 #: Smoothing of the measured ax that loads the tyres and of the yaw rate that starts a window,
 #: s: IMU vibration (several m/s² on real cars) must not move the loads or the start state.
@@ -19,7 +20,7 @@ def measured_longitudinal(rec: Recording, wheel_radius: float) -> tuple[np.ndarr
     """(T,) speed and (T,) smoothed longitudinal specific force of the speed-driven mode:
     `Recording.inputs`' rule (vx else wheel speeds × radius; ax else the speed's slope),
     then ax smoothed over `SMOOTHING` s."""
-    inputs = rec.inputs(longitudinal="speed", wheel_radius=wheel_radius)
+    inputs = rec.inputs(longitudinal=SpeedDriven, wheel_radius=wheel_radius)
     return np.asarray(inputs.speed), running_mean(np.asarray(inputs.accel), _samples(rec))
 
 
@@ -38,10 +39,13 @@ def start_speed(rec: Recording, wheel_radius: float) -> tuple[np.ndarray, str | 
     return estimate.speed, estimate.describe()
 
 
-def longitudinal_arrays(rec: Recording, wheel_radius: float, mode: str) -> tuple[np.ndarray, np.ndarray]:
-    """(T,) speed and (T,) smoothed longitudinal specific force of a problem in `mode`: speed
-    mode's `measured_longitudinal`; in torque mode `start_speed` (window starts only) and zeros."""
-    if mode == "speed":
+def longitudinal_arrays(
+    rec: Recording, wheel_radius: float, model: type[AbstractVehicleModel]
+) -> tuple[np.ndarray, np.ndarray]:
+    """(T,) speed and (T,) smoothed longitudinal specific force of a problem simulated by `model`:
+    `SpeedDriven`'s `measured_longitudinal`; for `TorqueDriven` `start_speed` (window starts only)
+    and zeros."""
+    if issubclass(model, SpeedDriven):
         return measured_longitudinal(rec, wheel_radius)
     speed = start_speed(rec, wheel_radius)[0]
     return speed, np.zeros_like(speed)

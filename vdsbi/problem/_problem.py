@@ -15,7 +15,18 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..io import InputError, Recording
-from ..simulator import CHANNELS, GRAVITY, LONGITUDINAL_MODES, Decimator, Inputs, Vehicle, model_class
+from ..simulator import (
+    CHANNELS,
+    GRAVITY,
+    LONGITUDINAL_MODES,
+    AbstractVehicleModel,
+    Decimator,
+    Inputs,
+    SpeedDriven,
+    TorqueDriven,
+    Vehicle,
+    model_class,
+)
 from ._limit import slides
 from ._measured import (
     TORQUE_SPEED_TOLERANCE,
@@ -254,45 +265,59 @@ def longitudinal_mode(rec: Recording, longitudinal: str = "auto") -> str:
     Raises:
         InputError: an unknown mode, or "torque" for a recording without torques.
     """
+    return _longitudinal_model(rec, longitudinal).longitudinal
+
+
+def _longitudinal_model(rec: Recording, longitudinal: str) -> type[AbstractVehicleModel]:
+    """`TorqueDriven` or `SpeedDriven` for `rec` and a user's setting (`longitudinal_mode`)."""
     if longitudinal not in (*LONGITUDINAL_MODES, "auto"):
         raise InputError("settings", "--longitudinal", f"must be auto, torque or speed, got {longitudinal!r}")
-    mode = longitudinal
-    if mode == "auto":
-        mode = "torque" if rec.has_torques else "speed"
-    if mode == "torque" and not rec.has_torques:
+    if longitudinal == "auto":
+        return TorqueDriven if rec.has_torques else SpeedDriven
+    model = model_class(longitudinal)
+    if issubclass(model, TorqueDriven) and not rec.has_torques:
         raise InputError(
             rec.source,
             "torque_front",
             "no torque columns: the torque-driven model needs them; use the speed-driven mode "
             "(--longitudinal speed)",
         )
-    return mode
+    return model
 
 
-def _channels(rec: Recording, mode: str, settings: ProblemSettings) -> tuple[str, ...]:
+def _channels(
+    rec: Recording, model: type[AbstractVehicleModel], settings: ProblemSettings
+) -> tuple[str, ...]:
+    speed_driven = issubclass(model, SpeedDriven)
     allowed = [c for c in CHANNELS if c in rec.channels]
-    if mode == "speed":
+    if speed_driven:
         allowed = [c for c in allowed if c not in SPEED_MODE_INPUT_CHANNELS]
     if settings.channels is not None:
         bad = [c for c in settings.channels if c not in allowed]
         if bad:
             raise InputError(
-                rec.source, "channels", f"{bad} not available in {mode} mode (available: {allowed})"
+                rec.source,
+                "channels",
+                f"{bad} not available in {model.longitudinal} mode (available: {allowed})",
             )
         allowed = [c for c in CHANNELS if c in settings.channels]
-    need = 1 if mode == "speed" else 2
+    need = 1 if speed_driven else 2
     if len(allowed) < need:
-        what = "ay or yaw_rate" if mode == "speed" else "at least 2 measured channels"
+        what = "ay or yaw_rate" if speed_driven else "at least 2 measured channels"
         raise InputError(
-            rec.source, "channels", f"{mode}-driven identification needs {what}; found {allowed}"
+            rec.source,
+            "channels",
+            f"{model.longitudinal}-driven identification needs {what}; found {allowed}",
         )
     return tuple(allowed)
 
 
-def _decimator(rec: Recording, mode: str, settings: ProblemSettings) -> Decimator | None:
+def _decimator(
+    rec: Recording, model: type[AbstractVehicleModel], settings: ProblemSettings
+) -> Decimator | None:
     cutoff = settings.bandwidth
     if cutoff == "auto":
-        cutoff = None if mode == "torque" else 5.0
+        cutoff = None if issubclass(model, TorqueDriven) else 5.0
     if cutoff is None:
         return None
     factor = max(1, int(round(rec.rate / settings.output_rate)))
@@ -303,7 +328,9 @@ def _decimator(rec: Recording, mode: str, settings: ProblemSettings) -> Decimato
     return Decimator(rate=rec.rate, cutoff=float(cutoff), factor=factor)
 
 
-def _window_arrays(rec: Recording, windows: Sequence[Window], mode: str, vehicle: Vehicle):
+def _window_arrays(
+    rec: Recording, windows: Sequence[Window], model: type[AbstractVehicleModel], vehicle: Vehicle
+):
     """Model-rate arrays (W, T, …) of the windows, padded to a common length by holding the end."""
     idx = [
         (int(np.searchsorted(rec.t, w.t0 - 1e-9)), int(np.searchsorted(rec.t, w.t1 + 1e-9))) for w in windows
@@ -311,7 +338,7 @@ def _window_arrays(rec: Recording, windows: Sequence[Window], mode: str, vehicle
     n_max = max(i1 - i0 for i0, i1 in idx)
     torques = (rec.torque_front, rec.torque_rear) if rec.has_torques else (np.zeros_like(rec.t),) * 2
     u_all = np.stack([rec.steer, *torques], -1)
-    speed_all, accel_all = longitudinal_arrays(rec, vehicle.wheel_radius, mode)
+    speed_all, accel_all = longitudinal_arrays(rec, vehicle.wheel_radius, model)
     yaw_all = smoothed_yaw_rate(rec)
 
     def padded(a, i0, i1):
@@ -326,7 +353,7 @@ def _window_arrays(rec: Recording, windows: Sequence[Window], mode: str, vehicle
     v0 = np.array([np.median(speed_all[i0 : i0 + n_v0]) for i0, _ in idx])
     r0 = np.array([yaw_all[i0] if yaw_all is not None else 0.0 for i0, _ in idx])
     lengths = np.array([i1 - i0 for i0, i1 in idx])
-    if mode == "torque":
+    if issubclass(model, TorqueDriven):
         speed = accel = None
     return idx, t, u, speed, accel, np.maximum(v0, 0.5), r0, lengths
 
@@ -375,33 +402,33 @@ def make_problem(rec: Recording, vehicle: Vehicle, settings: ProblemSettings = P
         InputError: naming the recording and what is missing (torques, speed, channels, a
             segment outside the recording).
     """
-    mode = longitudinal_mode(rec, settings.longitudinal)
-    channels = _channels(rec, mode, settings)
+    model = _longitudinal_model(rec, settings.longitudinal)
+    channels = _channels(rec, model, settings)
     if settings.segment is not None:
         rec = _restrict(rec, settings.segment)
     # Torque mode needs a speed at each window start only: measured, else estimated.
-    speed_note = start_speed(rec, vehicle.wheel_radius)[1] if mode == "torque" else None
+    speed_note = start_speed(rec, vehicle.wheel_radius)[1] if issubclass(model, TorqueDriven) else None
     windows, described = choose_windows(
         rec,
         wheel_radius=vehicle.wheel_radius,
         max_window=settings.max_window,
         burn_in=settings.burn_in,
-        torques=mode == "torque",
+        torques=issubclass(model, TorqueDriven),
         held_out=settings.held_out,
         min_windows_to_split=settings.min_windows_to_split,
         max_windows=settings.max_windows,
         quiet_edges=settings.quiet_edges,
         exclude=_limit_stretches(rec, vehicle, settings),
     )
-    idx, t, u, speed, accel, v0, r0, lengths = _window_arrays(rec, windows, mode, vehicle)
-    decimator = _decimator(rec, mode, settings)
+    idx, t, u, speed, accel, v0, r0, lengths = _window_arrays(rec, windows, model, vehicle)
+    decimator = _decimator(rec, model, settings)
     factor = 1 if decimator is None else decimator.factor
     t_out = t[:, ::factor]
     y = _compared(rec, channels, idx, t.shape[1], decimator)
     valid, train, held = _masks(windows, t_out, lengths, rec.dt, settings.burn_in)
     segments = [(w.t0, w.t1) for w in windows]
     sigma_raw, source = raw_noise_std(rec, vehicle, channels, segments)
-    warnings = list(rec.warnings) + _torque_warning(rec, vehicle, mode, segments)
+    warnings = list(rec.warnings) + _torque_warning(rec, vehicle, model, segments)
     if speed_note is not None:
         warnings.append(f"{rec.source}: vx: {speed_note}")
         described = {**described, "initial_speed": speed_note}
@@ -409,7 +436,7 @@ def make_problem(rec: Recording, vehicle: Vehicle, settings: ProblemSettings = P
     return Problem(
         source=rec.source,
         vehicle=vehicle,
-        longitudinal=mode,
+        longitudinal=model.longitudinal,
         channels=channels,
         windows=tuple(windows),
         dt=rec.dt,
@@ -433,8 +460,10 @@ def make_problem(rec: Recording, vehicle: Vehicle, settings: ProblemSettings = P
     )
 
 
-def _torque_warning(rec: Recording, vehicle: Vehicle, mode: str, segments) -> list[str]:
-    if mode != "torque":
+def _torque_warning(
+    rec: Recording, vehicle: Vehicle, model: type[AbstractVehicleModel], segments
+) -> list[str]:
+    if not issubclass(model, TorqueDriven):
         return []
     err = torque_speed_error(rec, vehicle.wheel_radius, vehicle.mass, segments)
     if err is None or err <= TORQUE_SPEED_TOLERANCE:

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..io import Recording, find_segments, forward_speed, running_mean
+from ..io import Recording, Segment, find_segments, forward_speed, running_mean
 
 
 @dataclasses.dataclass(frozen=True)
@@ -149,6 +149,22 @@ def choose_windows(
         torques=torques,
         exclude=exclude,
     )
+    usable, described = _usable(rec, segs)
+    pieces = _pieces(usable, max_window)
+    activity = lateral_activity(rec, wheel_radius)
+    if quiet_edges and activity is not None:
+        pieces = _quiet_edges(rec, pieces, activity, max_window)
+    if max_windows is not None and len(pieces) > max_windows:
+        pieces, beyond = _longest(pieces, max_windows)
+        described["rejected"] = sorted(described["rejected"] + beyond)
+    described.update(_coverage(rec, pieces, activity))
+    windows, how = _held_out(pieces, held_out, min_windows_to_split, max_window, len(usable))
+    described.setdefault("how", how)
+    return windows, described
+
+
+def _usable(rec: Recording, segs: Sequence[Segment]) -> tuple[list[tuple[float, float]], dict]:
+    """The usable (t0, t1) of `segs` (the whole recording when none is), and their description."""
     usable = [(s.t0, s.t1) for s in segs if s.usable]
     rejected = [(s.t0, s.t1, s.reason) for s in segs if not s.usable]
     described = {
@@ -161,48 +177,66 @@ def choose_windows(
     if not usable:
         usable = [(float(rec.t[0]), float(rec.t[-1]))]
         described["how"] = "no usable stretch found: the whole recording"
-    pieces = _pieces(usable, max_window)
-    activity = lateral_activity(rec, wheel_radius)
-    if quiet_edges and activity is not None:
-        pieces = _quiet_edges(rec, pieces, activity, max_window)
-    if max_windows is not None and len(pieces) > max_windows:
-        chosen = sorted(sorted(pieces, key=lambda p: (-(p[1] - p[0]), p[0]))[:max_windows])
-        extra = [
-            [round(a, 3), round(b, 3), f"beyond max_windows={max_windows}"]
-            for a, b in pieces
-            if (a, b) not in chosen
-        ]
-        described["rejected"] = sorted(described["rejected"] + extra)
-        pieces = chosen
+    return usable, described
+
+
+def _longest(pieces: list[tuple[float, float]], max_windows: int) -> tuple[list[tuple[float, float]], list]:
+    """The `max_windows` longest pieces (ties by time) in time order, and the rest as rejected
+    [t0, t1, reason]."""
+    chosen = sorted(sorted(pieces, key=lambda p: (-(p[1] - p[0]), p[0]))[:max_windows])
+    beyond = [
+        [round(a, 3), round(b, 3), f"beyond max_windows={max_windows}"]
+        for a, b in pieces
+        if (a, b) not in chosen
+    ]
+    return chosen, beyond
+
+
+def _coverage(rec: Recording, pieces: list[tuple[float, float]], activity: np.ndarray | None) -> dict:
+    """How much of the drive the windows cover: "seconds" and "lateral_information_share"."""
     in_windows = sum(b - a for a, b in pieces)
-    described["seconds"] = {
-        "drive": round(rec.duration, 2),
-        "in_windows": round(in_windows, 2),
-        "dropped": round(rec.duration - in_windows, 2),
+    out: dict = {
+        "seconds": {
+            "drive": round(rec.duration, 2),
+            "in_windows": round(in_windows, 2),
+            "dropped": round(rec.duration - in_windows, 2),
+        }
     }
     share = lateral_information_share(rec, pieces, activity)
     if share is not None:
-        described["lateral_information_share"] = round(share, 4)
+        out["lateral_information_share"] = round(share, 4)
+    return out
+
+
+def _held_out(
+    pieces: list[tuple[float, float]],
+    held_out: float,
+    min_windows_to_split: int,
+    max_window: float,
+    num_stretches: int,
+) -> tuple[list[Window], str]:
+    """Windows over `pieces` with their roles (`choose_windows`), and how they were held out."""
     if held_out == 0.0:
         windows = [Window(a, b, "train") for a, b in pieces]
         how = f"{len(windows)} window(s) of <= {max_window:g} s over the usable driving; none held out"
-    elif len(pieces) >= min_windows_to_split:
-        total = sum(b - a for a, b in pieces)
-        elapsed = np.cumsum([0.0] + [b - a for a, b in pieces])[:-1]
-        windows = [
-            Window(a, b, "held" if e >= (1 - held_out) * total - 1e-9 else "train")
-            for (a, b), e in zip(pieces, elapsed)
-        ]
-        if all(w.role == "held" for w in windows) or all(w.role == "train" for w in windows):
-            windows = [dataclasses.replace(w, role="train") for w in windows[:-1]] + [
-                dataclasses.replace(windows[-1], role="held")
-            ]
-        how = (
-            f"{len(windows)} windows of <= {max_window:g} s over {len(usable)} usable stretch(es); "
-            f"the last {held_out:.0%} of the usable driving held out"
-        )
-    else:
+        return windows, how
+    if len(pieces) < min_windows_to_split:
         windows = [Window(a, b, "train", split=a + (1 - held_out) * (b - a)) for a, b in pieces]
         how = f"{len(windows)} window(s) of <= {max_window:g} s; the last {held_out:.0%} of each held out"
-    described.setdefault("how", how)
-    return windows, described
+        return windows, how
+    total = sum(b - a for a, b in pieces)
+    elapsed = np.cumsum([0.0] + [b - a for a, b in pieces])[:-1]
+    windows = [
+        Window(a, b, "held" if e >= (1 - held_out) * total - 1e-9 else "train")
+        for (a, b), e in zip(pieces, elapsed)
+    ]
+    # Fit and validation both need a window: with all on one side, the last alone is held out.
+    if all(w.role == "held" for w in windows) or all(w.role == "train" for w in windows):
+        windows = [dataclasses.replace(w, role="train") for w in windows[:-1]] + [
+            dataclasses.replace(windows[-1], role="held")
+        ]
+    how = (
+        f"{len(windows)} windows of <= {max_window:g} s over {num_stretches} usable stretch(es); "
+        f"the last {held_out:.0%} of the usable driving held out"
+    )
+    return windows, how
