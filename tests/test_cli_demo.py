@@ -51,6 +51,10 @@ def test_demo_runs_the_whole_loop_into_one_folder(tmp_path):
         check_folder(folder)
     page = (out / "report.html").read_text()
     assert "sensor_bias.ax" in page and "truth" in page
+    # The before/after overlay draws each run's band over the held-out part it was scored on.
+    for run in (res.identified, res.refined):
+        held = run.validation.held & run.validation.valid
+        assert held.any() and np.isfinite(run.ppc["q95"][held]).all()
     for name in ("before_after.png", "pairplot_0.png", "pairplot_1.png"):
         assert (out / name).stat().st_size > 0
     posterior = json.loads((out / "identify" / "posterior.json").read_text())

@@ -69,3 +69,15 @@ def test_simulate_predicts_a_torque_free_recording_from_its_own_state(tmp_path):
         err = pred[c].to_numpy() - measured.channels[c]
         # The recording's own sensor noise (0.02) plus a few per cent of the signal.
         assert np.sqrt(np.mean(err**2)) < 0.02 * 1.2 + 0.03 * np.std(measured.channels[c]), c
+
+
+def test_determined_directions_are_in_log_space_of_positive_parameters_only():
+    # A bias whose prior spans zero has no logarithm: it is left out, however narrow its posterior.
+    from vdsbi.diagnostics import determined_directions
+
+    rng = np.random.default_rng(0)
+    names = ["C_alpha_f", "sensor_bias.ax"]
+    prior = np.stack([rng.uniform(2e4, 2e5, 4000), rng.uniform(-0.5, 0.5, 4000)], 1)
+    post = np.stack([rng.normal(8e4, 2e3, 4000), rng.normal(0.3, 0.004, 4000)], 1)
+    (d,) = determined_directions(post, prior, names, names)
+    assert set(d["weights"]) == {"C_alpha_f"} and 0 < d["ratio"] < 0.1

@@ -107,3 +107,27 @@ def test_halves_that_share_one_theta_rarely_widen_and_a_moved_half_is_caught():
     assert joint is not None and joint["scale"] == joint["D2"] / 3 > 1.0
     assert list(shifts) == [0] and shifts[0]["z_shift"] == pytest.approx(abs(exact[0]), rel=1e-6)
     assert np.all(np.diag(cov) > joint["scale"] * np.diag(args[0]) - 1e-12)
+
+
+def test_the_parameters_a_drive_informs_are_those_its_channels_depend_on(x64):
+    # The step test agrees with the Jacobian's non-zero columns; following the measured speed, the
+    # longitudinal slip stiffnesses act on nothing compared.
+    import jax
+    import jax.numpy as jnp
+
+    from vdsbi.diagnostics._likelihood import _informed
+    from vdsbi.problem import split_parameters, windowed_model
+
+    veh = default_vehicle()
+    box = Box.from_dict(prior_box(veh), PARAM_NAMES)
+    box = Box(jnp.asarray(box.low, jnp.float64), jnp.asarray(box.high, jnp.float64), PARAM_NAMES)
+    z0 = np.asarray(box.to_unbounded(THETA))
+    for mode in ("speed", "torque"):
+        prob = make_problem(_drive(duration=8.0), veh, ProblemSettings(longitudinal=mode, max_window=6.0))
+        wm = windowed_model(prob)
+        compared = lambda z, wm=wm: wm(*split_parameters(box.from_unbounded(z), ()))[0]
+        jac = jax.jacfwd(compared)(jnp.asarray(z0))
+        jac = np.where(np.asarray(prob.valid)[..., None, None], np.asarray(jac), 0.0)
+        depends = {n for n, col in zip(PARAM_NAMES, np.moveaxis(jac, -1, 0)) if np.any(col != 0.0)}
+        assert set(_informed(wm, prob, box, z0, (), batch=4)) == depends, mode
+        assert ("C_kappa_f" in depends) == (mode == "torque"), mode

@@ -58,7 +58,9 @@ class IdentifyResult:
             combinations, validation, predictive check, warnings).
         out_dir: where the files were written, or None.
         problem: the whole drive's `vdsbi.problem.Problem` (every usable window).
-        ppc: the posterior-predictive 5/50/95 % band on the validation problem's windows.
+        ppc: the posterior-predictive 5/50/95 % band on `validation`'s windows.
+        validation: the problem whose held-out part the band and the validation scores are on
+            (`problem` itself when nothing is held out).
     """
 
     posterior: Any
@@ -67,6 +69,7 @@ class IdentifyResult:
     out_dir: Path | None = None
     problem: Any = None
     ppc: dict[str, Any] | None = None
+    validation: Any = None
 
     def table(self) -> str:
         """Per parameter: the estimate (the best fit, what `export` writes), the posterior's std and
@@ -197,7 +200,9 @@ def identify(
             fit = checked
         else:
             say("refitting on all the usable driving: the estimate and the posterior reported")
-            fit = fit_likelihood(full, np.concatenate([checked.theta[None], starts]), box, effects=effects)
+            fit = fit_likelihood(
+                full, np.concatenate([checked.theta[None], starts]), box, effects=effects, noise=checked.noise
+            )
         samples = np.asarray(fit.sample(k_post, settings.num_samples), float)
         summary = _summary(full, samples, fit, state, run_info, box, effects, veh)
         summary["vehicle"] = veh.to_dict()  # the constants `vdsbi export` needs beside θ
@@ -210,7 +215,7 @@ def identify(
         summary["warnings"] = _warnings(
             samples, summary, box, names or (recording, vehicle, out_dir), longitudinal
         )
-        result = IdentifyResult(estimator, samples, summary, out, full, band)
+        result = IdentifyResult(estimator, samples, summary, out, full, band, prob)
         if out is not None:
             write_outputs(out, result, prob, band)
     return result

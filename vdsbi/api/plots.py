@@ -227,7 +227,7 @@ def before_after_plot(
     prior box with the truth; below, the held-out recording against each run's 90 % predictive band.
 
     Args:
-        runs: (label, `IdentifyResult` with `problem` and `ppc`) pairs, e.g. before and after
+        runs: (label, `IdentifyResult` with `validation` and `ppc`) pairs, e.g. before and after
             modelling an effect (same drive, same windows).
         truth: true values by parameter name (red lines).
         channels: channels of the held-out overlay.
@@ -274,7 +274,7 @@ def before_after_plot(
 
 def _held_out_bands(ax, runs, channel: str, colours) -> None:
     """The held-out part of every window: each run's 90 % band and the recording."""
-    prob = runs[0][1].problem
+    prob = runs[0][1].validation
     i = list(prob.channels).index(channel)
     first = True
     for w in range(prob.num_windows):

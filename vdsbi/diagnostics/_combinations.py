@@ -66,11 +66,12 @@ def _combinations(samples: np.ndarray, names: Sequence[str], vehicle: Vehicle, s
 def determined_directions(
     samples: np.ndarray, prior_samples: np.ndarray, names: Sequence[str], free: Sequence[str]
 ) -> list[dict]:
-    """Directions in log-parameter space (of the `free` parameters) that the drive determines:
-    eigenvectors of the posterior covariance of log θ whose std is below `DETERMINED_RATIO` of
-    the prior's std along them, best first; each as {"weights": {name: w}, "std", "ratio"}
-    (|w| summing to 1, small weights dropped)."""
-    idx = [names.index(n) for n in free if np.all(samples[:, names.index(n)] > 0)]
+    """Directions in log-parameter space (of the `free` parameters with a positive prior) that
+    the drive determines: eigenvectors of the posterior covariance of log θ whose std is below
+    `DETERMINED_RATIO` of the prior's std along them, best first; each as {"weights": {name: w},
+    "std", "ratio"} (|w| summing to 1, small weights dropped)."""
+    positive = lambda i: np.all(samples[:, i] > 0) and np.all(prior_samples[:, i] > 0)
+    idx = [names.index(n) for n in free if positive(names.index(n))]
     if not idx:
         return []
     logs = np.log(samples[:, idx])

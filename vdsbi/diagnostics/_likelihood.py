@@ -6,9 +6,9 @@ uniform prior on θ is logistic in z; it is approximated by N(0, π²/3) per coo
 logistic's variance), which keeps a direction the drive does not inform at the prior.
 
 Noise model: on a real drive the residual after the best fit is model error — larger than the
-sensor noise and coloured. Each channel c gets a scale s_c (the RMS residual at the fit, never
-below the sensor noise σ_c: the Gaussian likelihood with an unknown variance per channel,
-profiled) and an integrated autocorrelation time τ_c of that residual (`vdsbi.problem.
+sensor noise and coloured. Each channel c gets a scale s_c (the RMS residual at the fit: the
+Gaussian likelihood with an unknown variance per channel, profiled; never below `SENSOR_SHARE` of
+the sensor noise σ_c) and an integrated autocorrelation time τ_c of that residual (`vdsbi.problem.
 integrated_autocorrelation_time`), so its N_c samples count as N_c/τ_c independent ones. The
 fit minimises Σ_c Σ_k r_ck²/(s_c²·τ_c) + the prior term, by iterated reweighting (fit, re-estimate
 s and τ, refit), with `levenberg_marquardt`; the Laplace covariance (JᵀJ + prior precision)⁻¹ is
@@ -46,6 +46,11 @@ from ._least_squares import laplace_covariance, levenberg_marquardt
 PRIOR_Z_STD = float(np.pi / np.sqrt(3.0))
 #: Largest step of one logit coordinate per iteration (a sigmoid saturates past |z| ≈ 5).
 MAX_Z_STEP = 2.0
+#: The residual's scale may fall below the recording's sensor-noise estimate down to this share of
+#: it: that estimate takes the noise as white, and a real IMU's vibration lies mostly above the
+#: problem's filter band, so the filter removes more of it than the estimate assumes; the floor
+#: keeps a fit of few effective samples from claiming less noise than it could have fitted away.
+SENSOR_SHARE = 0.25
 
 
 class NoiseModel(eqx.Module):
@@ -53,7 +58,7 @@ class NoiseModel(eqx.Module):
 
     Attributes:
         channels: channel names.
-        scale: (C,) RMS residual at the fit (≥ the sensor noise), channel units.
+        scale: (C,) RMS residual at the fit (≥ `SENSOR_SHARE` of the sensor noise), channel units.
         tau: (C,) integrated autocorrelation time of the residual, in compared samples.
         sensor: (C,) sensor noise std after the problem's filter, channel units.
         samples: (C,) compared samples fitted per channel.
@@ -156,6 +161,7 @@ def fit_likelihood(
     part: str = "train",
     reweights: int = 2,
     max_steps: int = 40,
+    noise: NoiseModel | None = None,
     solver: Solver = Solver(),
 ) -> LikelihoodPosterior:
     """The likelihood posterior of `problem`'s `part` samples.
@@ -172,6 +178,10 @@ def fit_likelihood(
         part: "train" (the fit that is validated on the held-out part) or "valid" (everything).
         reweights: noise-model passes after the first fit.
         max_steps: Levenberg–Marquardt iterations per pass.
+        noise: the first pass's noise model: a previous fit's of the same channels (the refit
+            on all the driving starts from the validation fit's, so that its first pass does not
+            weigh the channels by their spread and leave the basin that fit found); default:
+            each channel's spread.
     """
     names = parameter_names(effects)
     if tuple(box.names) != names:
@@ -179,10 +189,10 @@ def fit_likelihood(
     # float64: in float32 the Jacobian of a long drive is too coarse and a step into a spinning
     # window goes unnoticed.
     with jax.enable_x64(True):
-        return _fit(problem, start, box, effects, free, part, reweights, max_steps, solver)
+        return _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, solver)
 
 
-def _fit(problem, start, box, effects, free, part, reweights, max_steps, solver):
+def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, solver):
     names = box.names
     # Every window, the others masked: the validation fit and the refit on all the driving then
     # share one problem shape, and so one compilation.
@@ -193,10 +203,13 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, solver)
     sensor = np.asarray(data.sigma, float)
     scale = np.maximum(np.array([np.std(data.y[..., c][mask]) for c in range(len(data.channels))]), sensor)
     tau = np.ones_like(scale)
-    start = _best_start(wm, data, mask, np.atleast_2d(np.asarray(start, float)), effects, scale)
+    if noise is not None:
+        scale, tau = np.asarray(noise.scale, float), np.asarray(noise.tau, float)
+    starts = np.atleast_2d(np.asarray(start, float))
+    start = _best_start(wm, data, mask, starts, effects, scale)
     z0 = np.asarray(box64.to_unbounded(start, edge=1e-4))
     if free is None:
-        free = _informed(wm, data, box64, z0, effects)
+        free = _informed(wm, data, box64, z0, effects, batch=len(starts))
     free = tuple(n for n in names if n in free)
     idx = np.asarray([names.index(n) for n in free], dtype=int)
     fit = _fitter(wm, data, mask, box64, effects, jnp.asarray(z0), jnp.asarray(idx), max_steps)
@@ -207,7 +220,7 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, solver)
         z, converged = res.z, bool(res.converged)
         steps.append(int(res.num_steps))
         resid = np.asarray(res.residual).reshape(*mask.shape, len(scale)) * std
-        scale = np.maximum(np.sqrt(np.sum(resid**2, axis=(0, 1)) / mask.sum()), sensor)
+        scale = np.maximum(np.sqrt(np.sum(resid**2, axis=(0, 1)) / mask.sum()), SENSOR_SHARE * sensor)
         tau = integrated_autocorrelation_time(resid, mask)
     # The Laplace covariance with the final noise model: reweight the last Jacobian's rows.
     jac = np.asarray(res.jacobian).reshape(*mask.shape, len(scale), len(idx)) * (std / scale)[:, None]
@@ -350,20 +363,25 @@ def _consistent(cov: np.ndarray, jac: np.ndarray, r: np.ndarray, z: np.ndarray, 
     return cov * np.outer(factor, factor), shifts, joint
 
 
-@eqx.filter_jit
-def _jacobian(wm, box: Box, effects, z):
-    def compared(z):
-        theta, ep = split_parameters(box.from_unbounded(z), effects)
-        return wm(theta, ep)[0]
-
-    return jax.jacfwd(compared)(z)
+#: Step, in logit coordinates, of the test for which parameters the channels depend on.
+INFORMED_STEP = 0.1
 
 
-def _informed(wm, data: Problem, box: Box, z0: np.ndarray, effects) -> tuple[str, ...]:
-    """Parameters the compared channels depend on at z0 (C_κ without torques: none)."""
-    jac = np.asarray(_jacobian(wm, box, tuple(effects), jnp.asarray(z0)))
-    jac = np.where(np.asarray(data.valid)[..., None, None], jac, 0.0)
-    return tuple(n for n, col in zip(box.names, np.moveaxis(jac, -1, 0)) if np.any(col != 0.0))
+def _informed(wm, data: Problem, box: Box, z0: np.ndarray, effects, batch: int) -> tuple[str, ...]:
+    """Parameters the compared channels depend on at z0 (C_κ without torques: none): those whose
+    logit step of `INFORMED_STEP` changes a valid sample. One batch of `batch` (or more) draws, so
+    that the program `_best_start` compiled for its candidates serves it."""
+    steps = z0 + INFORMED_STEP * np.eye(len(z0))
+    draws = np.concatenate([z0[None], steps, np.repeat(z0[None], max(0, batch - len(z0) - 1), 0)])
+    theta, effect_params = split_parameters(jax.vmap(box.from_unbounded)(jnp.asarray(draws)), effects)
+    pred, ok = simulate_draws(None, wm, theta, effect_params=effect_params)
+    pred, ok = np.asarray(pred)[: len(z0) + 1], np.asarray(ok)[: len(z0) + 1]
+    valid = np.asarray(data.valid)[..., None]
+    moved = [
+        not (ok[0] and ok[i + 1]) or np.any(np.where(valid, pred[i + 1] != pred[0], False))
+        for i in range(len(z0))
+    ]
+    return tuple(n for n, m in zip(box.names, moved) if m)
 
 
 def _best_start(wm, data: Problem, mask, starts: np.ndarray, effects, scale: np.ndarray) -> np.ndarray:
