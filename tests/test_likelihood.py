@@ -131,3 +131,14 @@ def test_the_parameters_a_drive_informs_are_those_its_channels_depend_on(x64):
         depends = {n for n, col in zip(PARAM_NAMES, np.moveaxis(jac, -1, 0)) if np.any(col != 0.0)}
         assert set(_informed(wm, prob, box, z0, (), batch=4)) == depends, mode
         assert ("C_kappa_f" in depends) == (mode == "torque"), mode
+
+
+def test_a_starting_noise_model_must_be_of_the_problems_channels():
+    from vdsbi.diagnostics._likelihood import NoiseModel
+
+    veh = default_vehicle()
+    prob = make_problem(_drive(duration=8.0), veh, ProblemSettings(longitudinal="speed", max_window=6.0))
+    box = Box.from_dict(prior_box(veh), PARAM_NAMES)
+    other = NoiseModel(("ax",), np.ones(1), np.ones(1), np.ones(1), np.ones(1))
+    with pytest.raises(ValueError, match="noise model"):
+        fit_likelihood(prob, THETA, box, noise=other)

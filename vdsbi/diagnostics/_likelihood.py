@@ -201,9 +201,12 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
     box64 = Box(jnp.asarray(box.low, jnp.float64), jnp.asarray(box.high, jnp.float64), names)
     wm = windowed_model(data, effects, solver)
     sensor = np.asarray(data.sigma, float)
-    scale = np.maximum(np.array([np.std(data.y[..., c][mask]) for c in range(len(data.channels))]), sensor)
-    tau = np.ones_like(scale)
-    if noise is not None:
+    if noise is None:
+        scale = np.maximum(np.std(data.y[mask], axis=0), sensor)
+        tau = np.ones_like(scale)
+    elif tuple(noise.channels) != tuple(data.channels):
+        raise ValueError(f"noise model of {noise.channels}, problem channels {data.channels}")
+    else:
         scale, tau = np.asarray(noise.scale, float), np.asarray(noise.tau, float)
     starts = np.atleast_2d(np.asarray(start, float))
     start = _best_start(wm, data, mask, starts, effects, scale)
