@@ -111,41 +111,67 @@ def design(
     import jax
 
     veh, source = load_vehicle(vehicle)
-    if target not in (*PARAM_NAMES, "D"):
-        raise InputError("--target", "value", f"expected one of {[*PARAM_NAMES, 'D']}, got {target!r}")
-    if steps < 0:
-        raise InputError("--steps", "value", "must be >= 0")
+    _check_target_and_steps(target, steps)
     th = checked_theta(theta, veh)
     limits = _limits(duration, max_steer, max_drive, max_brake, brake_front_share, speed_window)
     channels, _ = noise_channels(list(SEED_CHANNELS), noise, veh, source)
     with jax.enable_x64(True):
         import jax.numpy as jnp
 
-        from ..diagnostics import Maneuver, check_limits, design_problem
+        from ..diagnostics import Maneuver
         from ..simulator import make_model
 
         model, th = make_model(veh), jnp.asarray(th, dtype=float)
-        problem = design_problem(
-            model,
-            th,
-            limits,
-            target=None if target == "D" else target,
-            channels=channels,
-            noise=noise,
-            noise_std_map=veh.noise_std,
-        )
+        problem = _problem(model, th, limits, target, channels, noise, veh.noise_std)
         start = Maneuver.seed_like(limits)
         res = _optimise(problem, start, steps, learning_rate, log or (lambda s: None))
         designed, v0 = res.maneuver.inputs(limits), float(res.maneuver.initial_speed(limits))
         fisher = dict(channels=channels, noise=noise, noise_std=veh.noise_std)
-        bounds = {"target": target, "noise": noise, "channels": channels}
-        bounds |= _reports(model, th, limits, start, res.maneuver, fisher)
-        before, after = bounds["before"]["crb_std"], bounds["after"]["crb_std"]
-        bounds["improvement"] = {n: before[n] / after[n] for n in before}
-        bounds["limits_check"] = check_limits(model, th, designed, v0, limits)
+        bounds = _bounds(model, th, limits, start, res.maneuver, designed, v0, fisher, target)
         rec = _recording(model, th, designed, v0)
         described = res.maneuver.describe(limits)
-    info = {
+    return DesignReport(bounds, _info(target, described, limits, steps, res), rec)
+
+
+def _check_target_and_steps(target: str, steps: int) -> None:
+    """InputError for a target that is neither a parameter nor "D", or a negative step count."""
+    if target not in (*PARAM_NAMES, "D"):
+        raise InputError("--target", "value", f"expected one of {[*PARAM_NAMES, 'D']}, got {target!r}")
+    if steps < 0:
+        raise InputError("--steps", "value", "must be >= 0")
+
+
+def _problem(model, theta, limits, target: str, channels, noise: str, noise_std_map):
+    """`vdsbi.diagnostics.design_problem` for `target` ("D": log det F, no single parameter)."""
+    from ..diagnostics import design_problem
+
+    return design_problem(
+        model,
+        theta,
+        limits,
+        target=None if target == "D" else target,
+        channels=channels,
+        noise=noise,
+        noise_std_map=noise_std_map,
+    )
+
+
+def _bounds(model, theta, limits, start, maneuver, designed, v0: float, fisher: dict, target: str) -> dict:
+    """bounds.json: the Fisher reports of `_reports`, the improvement per parameter
+    (CRB std before / after) and the designed maneuver's limits check."""
+    from ..diagnostics import check_limits
+
+    bounds = {"target": target, "noise": fisher["noise"], "channels": fisher["channels"]}
+    bounds |= _reports(model, theta, limits, start, maneuver, fisher)
+    before, after = bounds["before"]["crb_std"], bounds["after"]["crb_std"]
+    bounds["improvement"] = {n: before[n] / after[n] for n in before}
+    bounds["limits_check"] = check_limits(model, theta, designed, v0, limits)
+    return bounds
+
+
+def _info(target: str, described, limits, steps: int, res) -> dict[str, Any]:
+    """design.json: the designed maneuver, the limits and the optimiser's history."""
+    return {
         "target": target,
         "maneuver": described,
         "limits": {k: getattr(limits, k) for k in limits.__dataclass_fields__},
@@ -153,7 +179,6 @@ def design(
         "best_step": res.best_step,
         "history": {k: v.tolist() for k, v in res.history.items()},
     }
-    return DesignReport(bounds, info, rec)
 
 
 def _limits(duration, max_steer, max_drive, max_brake, brake_front_share, speed_window):

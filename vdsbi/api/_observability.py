@@ -80,25 +80,52 @@ def observability(
     Raises:
         InputError: a value that does not fit the vehicle or the maneuver.
     """
-    import jax
-
     veh, source = load_vehicle(vehicle)
-    rec = maneuver if isinstance(maneuver, Recording) else None
-    problem = None if rec is None else make_problem(rec, veh)
-    mode = "torque" if problem is None else problem.longitudinal
-    inputs = rec.inputs(longitudinal=mode, wheel_radius=veh.wheel_radius) if rec is not None else maneuver
+    rec, problem, mode, inputs = _maneuver(maneuver, veh)
+    channels = _checked_channels(channels, problem)
+    v0 = checked_v0(_default_v0(rec, veh) if v0 is None else v0)
+    channels, dropped = noise_channels(channels, noise, veh, source)
+    th = checked_theta(theta, veh)
+    model, params = _model(veh, effects, effect_params, mode)
+    rep = _report(model, th, inputs, v0, params, channels, noise, veh, problem)
+    rep["maneuver"] = label or (rec.source if rec is not None else "inputs")
+    rep["v0"] = v0
+    rep["noise"] = noise
+    rep["channels_without_noise_std"] = dropped
+    rep["effects"] = list(effects)
+    return ObservabilityResult(rep)
+
+
+def _maneuver(maneuver: Recording | Inputs, vehicle: Vehicle):
+    """``(recording or None, its Problem or None, longitudinal mode, inputs)``: a recording as
+    `identify` sees it; an `Inputs` profile as is, torque-driven."""
+    if not isinstance(maneuver, Recording):
+        return None, None, "torque", maneuver
+    problem = make_problem(maneuver, vehicle)
+    mode = problem.longitudinal
+    return maneuver, problem, mode, maneuver.inputs(longitudinal=mode, wheel_radius=vehicle.wheel_radius)
+
+
+def _checked_channels(channels: Sequence[str] | None, problem) -> list[str]:
+    """The measured channels: as given, else the problem's, else the seed's; all known ones."""
     channels = list(channels or (problem.channels if problem is not None else SEED_CHANNELS))
     bad = [c for c in channels if c not in CHANNELS]
     if bad:
         raise InputError(
             "--channels", "value", f"unknown channel(s) {bad} (expected some of {list(CHANNELS)})"
         )
-    if v0 is None:
-        v0 = first_speed(rec, veh) if rec is not None else PROFILE_V0
-    v0 = checked_v0(v0)
-    channels, dropped = noise_channels(channels, noise, veh, source)
-    th = checked_theta(theta, veh)
-    model, params = _model(veh, effects, effect_params, mode)
+    return channels
+
+
+def _default_v0(rec: Recording | None, vehicle: Vehicle) -> float:
+    """The recording's first speed, else the seed profile's."""
+    return first_speed(rec, vehicle) if rec is not None else PROFILE_V0
+
+
+def _report(model, theta, inputs, v0, params, channels, noise: str, vehicle: Vehicle, problem) -> dict:
+    """`fisher_report` of the maneuver in float64, with a recording's identifiability."""
+    import jax
+
     from ..diagnostics import fisher_report, identifiability, model_fisher
 
     with jax.enable_x64(True):
@@ -106,25 +133,20 @@ def observability(
 
         fisher = model_fisher(
             model,
-            jnp.asarray(th, dtype=float),
+            jnp.asarray(theta, dtype=float),
             inputs,
             v0,
             tuple(jnp.asarray(p, dtype=float) for p in params),
             channels=channels,
             noise=noise,
-            noise_std=veh.noise_std,
+            noise_std=vehicle.noise_std,
         )
         rep = fisher_report(fisher)
         if problem is not None:
             # Over the whole drive as identify sees it (windows, shared filter, noise model).
-            rep["identifiability"] = identifiability(problem, th, veh.default_prior())
-            rep["longitudinal"] = mode
-    rep["maneuver"] = label or (rec.source if rec is not None else "inputs")
-    rep["v0"] = v0
-    rep["noise"] = noise
-    rep["channels_without_noise_std"] = dropped
-    rep["effects"] = list(effects)
-    return ObservabilityResult(rep)
+            rep["identifiability"] = identifiability(problem, theta, vehicle.default_prior())
+            rep["longitudinal"] = problem.longitudinal
+    return rep
 
 
 def _model(vehicle: Vehicle, effects: Sequence[str], effect_params, longitudinal: str = "torque"):

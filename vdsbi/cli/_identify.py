@@ -20,6 +20,16 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "the estimator into DIR. "
         "Each finished round is checkpointed in DIR; --resume continues an interrupted run.",
     )
+    _add_files(p)
+    _add_training(p)
+    _add_driving(p)
+    _add_parameters(p)
+    _add_validation(p)
+    return p
+
+
+def _add_files(p: argparse.ArgumentParser) -> None:
+    """The recordings, the vehicle, and where the results go."""
     p.add_argument(
         "recording",
         metavar="REC",
@@ -28,6 +38,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     )
     p.add_argument("--vehicle", required=True, metavar="V", help="vehicle constants (.json or .yaml)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
+
+
+def _add_training(p: argparse.ArgumentParser) -> None:
+    """The neural posterior's rounds, simulations and training, and the run itself."""
     p.add_argument("--rounds", type=int, default=2, help="APT rounds (default 2)")
     p.add_argument("--sims", type=int, default=1000, help="simulations per round (default 1000)")
     p.add_argument("--embedding", choices=("cnn", "stats"), default="stats", help="default stats")
@@ -36,6 +50,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--resume", action="store_true", help="continue from DIR's checkpoint")
     p.add_argument("--quiet", action="store_true", help="no progress bars or messages")
+
+
+def _add_driving(p: argparse.ArgumentParser) -> None:
+    """Which driving is used and how it is compared with the simulations."""
     p.add_argument("--segment", type=_args.segment, metavar="T0:T1", help="use this stretch, s")
     p.add_argument(
         "--max-duration",
@@ -52,6 +70,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         help="low-pass both the recording and the simulations at HZ before comparing (default: none "
         "with torques, 5 Hz following the speed: real IMUs carry vibration above the body dynamics)",
     )
+
+
+def _add_parameters(p: argparse.ArgumentParser) -> None:
+    """The parameters identified (effects joining θ), reference values and prior ranges."""
     p.add_argument(
         "--effects",
         default=None,
@@ -74,6 +96,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         help="uniform prior range of one parameter (e.g. signal_delay.delay=0.1:0.3, as `vdsbi diagnose` "
         "prints it); repeatable",
     )
+
+
+def _add_validation(p: argparse.ArgumentParser) -> None:
+    """The held-out share validated on, and the model rate the fits simulate at."""
     p.add_argument(
         "--holdout",
         type=float,
@@ -83,7 +109,6 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "estimate is always refit on all of it",
     )
     p.add_argument("--rate", type=float, default=200.0, help="model rate, Hz (default 200)")
-    return p
 
 
 def run(args) -> int:

@@ -392,55 +392,71 @@ def fisher_report(
     scale = np.asarray(fisher.scale, dtype=float)
     values = np.asarray(fisher.values, dtype=float)
     w, v = np.linalg.eigh(fz)
-    lam_max = float(w[-1]) if w.size else 0.0
-    tol = rank_rtol * lam_max
+    tol = rank_rtol * (float(w[-1]) if w.size else 0.0)
     rank = int(np.sum(w > tol))
-    ident_tol = 1.0 / max_relative_std**2
-    identifiable = int(np.sum(w >= ident_tol))
+    identifiable = _identifiable_summary(w, max_relative_std)
     cond = float(w[-1] / w[0]) if w[0] > 0 else math.inf
     weak = v[:, 0] * np.sign(v[np.argmax(np.abs(v[:, 0])), 0])
-    if rank == len(names):
-        cov_z = np.linalg.inv(fz)
-    else:  # bounds of unidentifiable directions are infinite; report the pseudo-inverse
-        cov_z = np.linalg.pinv(fz, rcond=rank_rtol, hermitian=True)
-    sd_z = np.sqrt(np.clip(np.diag(cov_z), 0, None))
-    corr = cov_z / np.outer(sd_z, sd_z)
-    crb = scale * sd_z
-    if rank < len(names):
-        # A parameter with any weight on a null direction has an infinite bound.
-        null = v[:, w <= tol]
-        crb = np.where(np.abs(null).max(axis=1) > 1e-6, np.inf, crb)
-    fim = fz / np.outer(scale, scale)
+    crb, corr = _crb_and_correlation(fz, w, v, scale, rank, len(names), rank_rtol, tol)
     return {
         "params": names,
         "channels": list(fisher.channels),
         "values": {n: float(x) for n, x in zip(names, values)},
         "scale": {n: float(s) for n, s in zip(names, scale)},
-        "fim": fim.tolist(),
+        "fim": (fz / np.outer(scale, scale)).tolist(),
         "fim_scaled": fz.tolist(),
         "eigenvalues": w.tolist(),
         "eigenvalues_note": "of the scaled F (parameters as fractions of `scale`), ascending",
         "condition_number": cond,
-        "rank": {
-            "value": rank,
-            "of": len(names),
-            "rtol": rank_rtol,
-            "tolerance": tol,
-            "rule": "eigenvalues of scaled F > rtol * largest eigenvalue",
-            "nonsingular": rank == len(names),
-        },
-        "identifiable": {
-            "value": identifiable,
-            "max_relative_std": max_relative_std,
-            "tolerance": ident_tol,
-            "rule": "eigen-directions whose Cramér-Rao std (in fractions of `scale`) is <= max_relative_std",
-        },
+        "rank": _rank_summary(rank, len(names), rank_rtol, tol),
+        "identifiable": identifiable,
         "crb_std": {n: float(s) for n, s in zip(names, crb)},
         "crb_relative": {n: float(s / abs(x)) if x != 0 else None for n, s, x in zip(names, crb, values)},
         "weakest_direction": {n: float(x) for n, x in zip(names, weak)},
         "weakest_direction_crb_std_scaled": float(1 / math.sqrt(w[0])) if w[0] > 0 else math.inf,
         "correlation": corr.tolist(),
     }
+
+
+def _rank_summary(value: int, of: int, rtol: float, tolerance: float) -> dict:
+    """The report's numerical rank of the scaled F, with its rule."""
+    return {
+        "value": value,
+        "of": of,
+        "rtol": rtol,
+        "tolerance": tolerance,
+        "rule": "eigenvalues of scaled F > rtol * largest eigenvalue",
+        "nonsingular": value == of,
+    }
+
+
+def _identifiable_summary(w: np.ndarray, max_relative_std: float) -> dict:
+    """How many eigen-directions of the scaled F (eigenvalues `w`) have a Cramér–Rao std of at
+    most `max_relative_std`, with the rule."""
+    tolerance = 1.0 / max_relative_std**2
+    return {
+        "value": int(np.sum(w >= tolerance)),
+        "max_relative_std": max_relative_std,
+        "tolerance": tolerance,
+        "rule": "eigen-directions whose Cramér-Rao std (in fractions of `scale`) is <= max_relative_std",
+    }
+
+
+def _crb_and_correlation(fz, w, v, scale, rank: int, num_params: int, rank_rtol: float, tol: float):
+    """Cramér–Rao std per parameter (physical units) and the correlation matrix, from F⁻¹ of the
+    scaled F (`w`, `v` its eigen-decomposition; `rank` its rank at tolerance `tol`)."""
+    if rank == num_params:
+        cov_z = np.linalg.inv(fz)
+    else:  # bounds of unidentifiable directions are infinite; report the pseudo-inverse
+        cov_z = np.linalg.pinv(fz, rcond=rank_rtol, hermitian=True)
+    sd_z = np.sqrt(np.clip(np.diag(cov_z), 0, None))
+    corr = cov_z / np.outer(sd_z, sd_z)
+    crb = scale * sd_z
+    if rank < num_params:
+        # A parameter with any weight on a null direction has an infinite bound.
+        null = v[:, w <= tol]
+        crb = np.where(np.abs(null).max(axis=1) > 1e-6, np.inf, crb)
+    return crb, corr
 
 
 def report_markdown(report: dict, title: str = "Observability") -> str:

@@ -106,49 +106,62 @@ def levenberg_marquardt(
     dtype = z0.dtype
     prec = jnp.zeros_like(z0) if prior_precision is None else jnp.asarray(prior_precision, dtype)
     mean = jnp.zeros_like(z0) if prior_mean is None else jnp.asarray(prior_mean, dtype)
-
-    def cost(r, z):
-        c = 0.5 * r @ r + 0.5 * jnp.sum(prec * (z - mean) ** 2)
-        return jnp.where(jnp.all(jnp.isfinite(r)), c, jnp.inf)
-
-    def iteration(s: _State) -> _State:
-        g = s.jac.T @ s.r + prec * (s.z - mean)
-        h = s.jac.T @ s.jac + jnp.diag(prec)
-        damp = jnp.diag(jnp.diag(h) + 1e-9)
-
-        def trial(t):
-            lam, tries, *_ = t
-            step = jnp.clip(-jnp.linalg.solve(h + lam * damp, g), -max_step, max_step)
-            z_new = s.z + step
-            c_new = cost(fn(z_new), z_new)
-            better = c_new < s.cost
-            return jnp.where(better, lam, 5.0 * lam), tries + 1, z_new, c_new, better
-
-        lam, _, z_new, c_new, better = jax.lax.while_loop(
-            lambda t: ~t[-1] & (t[1] < max_tries),
-            trial,
-            (s.lam, jnp.asarray(0), s.z, s.cost, jnp.asarray(False)),
-        )
-        rel = (s.cost - c_new) / jnp.maximum(s.cost, 1e-12)
-        # The Jacobian is needed only where a step was kept.
-        r, jac = jax.lax.cond(better, lambda: _residual_and_jacobian(fn, z_new), lambda: (s.r, s.jac))
-        done = ~better | (rel < rtol)
-        return _State(
-            z=jnp.where(better, z_new, s.z),
-            r=r,
-            jac=jac,
-            cost=jnp.where(better, c_new, s.cost),
-            lam=jnp.where(better, jnp.maximum(lam / 4.0, 1e-7), lam),
-            steps=s.steps + 1,
-            done=done,
-        )
-
     r0, jac0 = _residual_and_jacobian(fn, z0)
-    init = _State(z0, r0, jac0, cost(r0, z0), jnp.asarray(damping, dtype), jnp.asarray(0), jnp.asarray(False))
+    c0 = _cost(r0, z0, prec, mean)
+    init = _State(z0, r0, jac0, c0, jnp.asarray(damping, dtype), jnp.asarray(0), jnp.asarray(False))
+    iteration = lambda s: _iteration(fn, s, prec, mean, rtol, max_step, max_tries)
     s = jax.lax.while_loop(lambda s: ~s.done & (s.steps < max_steps), iteration, init)
     return LeastSquaresResult(
         z=s.z, residual=s.r, jacobian=s.jac, cost=s.cost, num_steps=s.steps, converged=s.done
     )
+
+
+def _cost(r, z, prec, mean):
+    """C(z); a non-finite residual makes the point infinitely bad."""
+    c = 0.5 * r @ r + 0.5 * jnp.sum(prec * (z - mean) ** 2)
+    return jnp.where(jnp.all(jnp.isfinite(r)), c, jnp.inf)
+
+
+def _iteration(fn, s: _State, prec, mean, rtol, max_step: float, max_tries: int) -> _State:
+    """One iteration: linearise at `s.z`, look for a damped step that lowers C, and keep it
+    (with a new Jacobian, λ shrunk) or stop."""
+    g = s.jac.T @ s.r + prec * (s.z - mean)
+    h = s.jac.T @ s.jac + jnp.diag(prec)
+    lam, z_new, c_new, better = _damped_step(fn, s, g, h, prec, mean, max_step, max_tries)
+    rel = (s.cost - c_new) / jnp.maximum(s.cost, 1e-12)
+    # The Jacobian is needed only where a step was kept.
+    r, jac = jax.lax.cond(better, lambda: _residual_and_jacobian(fn, z_new), lambda: (s.r, s.jac))
+    done = ~better | (rel < rtol)
+    return _State(
+        z=jnp.where(better, z_new, s.z),
+        r=r,
+        jac=jac,
+        cost=jnp.where(better, c_new, s.cost),
+        lam=jnp.where(better, jnp.maximum(lam / 4.0, 1e-7), lam),
+        steps=s.steps + 1,
+        done=done,
+    )
+
+
+def _damped_step(fn, s: _State, g, h, prec, mean, max_step: float, max_tries: int):
+    """Solve ``(h + λ·damp)·δ = −g``, growing λ ×5 until the step lowers C or `max_tries`
+    trials are spent (one residual each); returns ``(λ, z_new, C(z_new), lowered)``."""
+    damp = jnp.diag(jnp.diag(h) + 1e-9)
+
+    def trial(t):
+        lam, tries, *_ = t
+        step = jnp.clip(-jnp.linalg.solve(h + lam * damp, g), -max_step, max_step)
+        z_new = s.z + step
+        c_new = _cost(fn(z_new), z_new, prec, mean)
+        better = c_new < s.cost
+        return jnp.where(better, lam, 5.0 * lam), tries + 1, z_new, c_new, better
+
+    lam, _, z_new, c_new, better = jax.lax.while_loop(
+        lambda t: ~t[-1] & (t[1] < max_tries),
+        trial,
+        (s.lam, jnp.asarray(0), s.z, s.cost, jnp.asarray(False)),
+    )
+    return lam, z_new, c_new, better
 
 
 def laplace_covariance(

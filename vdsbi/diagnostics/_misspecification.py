@@ -115,23 +115,8 @@ def misspecification_test(
         raise ValueError(f"residuals: expected (W, L, C), got shape {res.shape}")
     bands = tuple(tuple(b) for b in bands)
     obs = _band_log_ratios(res, rate, bands, reference_band)  # (C, B)
-    n = res.size
-    if jacobian is not None and jacobian.size:
-        jac = np.asarray(jacobian, dtype=float)
-        if jac.shape[0] != n:
-            raise ValueError(f"jacobian: expected {n} rows, got {jac.shape[0]}")
-        u, s, _ = np.linalg.svd(jac, full_matrices=False)
-        q = u[:, s > 1e-10 * max(s.max(), 1e-300)]
-    else:
-        q = np.zeros((n, 0))
-    null = []
-    chunk = 50
-    for start in range(0, num_draws, chunk):
-        m = min(chunk, num_draws - start)
-        eps = rng.standard_normal((m, n))
-        eps = eps - (eps @ q) @ q.T
-        null.append(_band_log_ratios(eps.reshape((m,) + res.shape), rate, bands, reference_band))
-    null = np.concatenate(null)  # (D, C, B)
+    q = _fitted_directions(jacobian, res.size)
+    null = _null_log_ratios(rng, q, res.shape, num_draws, rate, bands, reference_band)  # (D, C, B)
     mu, sd = null.mean(0), null.std(0) + 1e-12
     z_obs = (obs - mu) / sd
     z_null = (null - mu) / sd
@@ -150,6 +135,32 @@ def misspecification_test(
         channels=tuple(channels),
         num_draws=num_draws,
     )
+
+
+def _fitted_directions(jacobian: np.ndarray | None, n: int) -> np.ndarray:
+    """(n, K') orthonormal basis of the Jacobian's column space: the residual directions the
+    fit absorbed, which the simulated null must lose too."""
+    if jacobian is None or not jacobian.size:
+        return np.zeros((n, 0))
+    jac = np.asarray(jacobian, dtype=float)
+    if jac.shape[0] != n:
+        raise ValueError(f"jacobian: expected {n} rows, got {jac.shape[0]}")
+    u, s, _ = np.linalg.svd(jac, full_matrices=False)
+    return u[:, s > 1e-10 * max(s.max(), 1e-300)]
+
+
+def _null_log_ratios(rng, q: np.ndarray, shape, num_draws: int, rate: float, bands, ref) -> np.ndarray:
+    """(D, C, B) band log-ratios of `num_draws` white-noise residuals of `shape` with the
+    fitted directions `q` projected out, drawn in chunks to bound memory."""
+    n = int(np.prod(shape))
+    null = []
+    chunk = 50
+    for start in range(0, num_draws, chunk):
+        m = min(chunk, num_draws - start)
+        eps = rng.standard_normal((m, n))
+        eps = eps - (eps @ q) @ q.T
+        null.append(_band_log_ratios(eps.reshape((m,) + shape), rate, bands, ref))
+    return np.concatenate(null)
 
 
 @dataclasses.dataclass

@@ -253,6 +253,43 @@ def _validation_loss(flow, val_batches: list, key: PRNGKeyArray, loss: AbstractL
     return total / sum(int(n) for _, _, n in val_batches)
 
 
+def _scheduled(state, training: TrainingSettings, epoch: int):
+    """``state`` with the optimiser's learning rate set for ``epoch`` (as is without a schedule)."""
+    if training.lr_schedule == "constant":
+        return state
+    lr = epoch_learning_rate(training.learning_rate, training.lr_schedule, epoch, training.max_epochs)
+    return (state[0], _set_learning_rate(state[1], lr), state[2])
+
+
+class _EarlyStopping:
+    """The best-validation flow so far, the loss histories, and the epochs since the last best."""
+
+    def __init__(self, flow: ConditionalFlow, patience: int):
+        self.best, self.flow, self.epoch, self.since = np.inf, flow, -1, 0
+        self.patience = patience
+        self.train_losses, self.val_losses = [], []
+
+    def update(self, epoch: int, flow: ConditionalFlow, train_loss: float, val_loss: float) -> bool:
+        """Record one epoch; True once ``patience`` epochs have passed without a better one."""
+        self.train_losses.append(train_loss)
+        self.val_losses.append(val_loss)
+        if val_loss < self.best:
+            self.best, self.flow, self.epoch, self.since = val_loss, flow, epoch, 0
+        else:
+            self.since += 1
+        return self.since >= self.patience
+
+    def info(self, batch_size: int) -> dict:
+        return {
+            "epochs": len(self.train_losses),
+            "best_epoch": self.epoch,
+            "best_val_loss": float(self.best),
+            "train_losses": self.train_losses,
+            "val_losses": self.val_losses,
+            "batch_size": batch_size,
+        }
+
+
 def fit(
     key: PRNGKeyArray,
     flow: ConditionalFlow,
@@ -286,49 +323,28 @@ def fit(
     ``flow`` (it damps the SGD noise a short, early-stopped round leaves in the weights).
     """
     optimizer = make_optimizer(training) if optimizer is None else optimizer
-    learning_rate, lr_schedule = training.learning_rate, training.lr_schedule
-    max_epochs, patience = training.max_epochs, training.patience
     mesh = data_mesh() if mesh is None else mesh
     tr, va = np.flatnonzero(~is_val), np.flatnonzero(is_val)
     bsz, vsz = _batch_sizes(tr.size, va.size, training.batch_size, mesh.devices.size)
-    scheduled = lr_schedule != "constant"
     state, decay = _train_state(flow, optimizer, mesh, training.average_epochs, tr.size // bsz)
-    flow = state[0]
     key, val_key = jax.random.split(key)
     data = (theta, x, prior_mask)
     val_batches = _validation_blocks(data, va, vsz, steps_per_call, mesh)
     # The validation loop compiles on a second thread while the first training block
     # compiles (XLA compiles without holding the GIL); its value, the initial loss, is unused.
-    warm = _in_background(eval_steps, flow, val_batches[0][0], val_key, loss, val_batches[0][1])
-    best, best_flow, best_epoch, since = np.inf, flow, -1, 0
-    train_hist, val_hist = [], []
-    for epoch in range(max_epochs):
+    warm = _in_background(eval_steps, state[0], val_batches[0][0], val_key, loss, val_batches[0][1])
+    epoch_args = (data, tr, bsz, steps_per_call, mesh, loss, optimizer, decay)  # fixed over epochs
+    stopping = _EarlyStopping(state[0], training.patience)
+    for epoch in range(training.max_epochs):
         key, k_perm, k_steps = jax.random.split(key, 3)
-        if scheduled:
-            lr = epoch_learning_rate(learning_rate, lr_schedule, epoch, max_epochs)
-            state = (state[0], _set_learning_rate(state[1], lr), state[2])
-        state, train_loss = _train_epoch(
-            state, (k_perm, k_steps), data, tr, bsz, steps_per_call, mesh, loss, optimizer, decay
-        )
+        state = _scheduled(state, training, epoch)
+        state, train_loss = _train_epoch(state, (k_perm, k_steps), *epoch_args)
         flow = state[0] if state[2] is None else state[2]
         warm.result()  # compiled (or raised) before the loop calls it: never compiled twice
         val_loss = _validation_loss(flow, val_batches, val_key, loss)
-        train_hist.append(train_loss)
-        val_hist.append(val_loss)
-        if val_loss < best:
-            best, best_flow, best_epoch, since = val_loss, flow, epoch, 0
-        else:
-            since += 1
+        stop = stopping.update(epoch, flow, train_loss, val_loss)
         if on_epoch_end is not None:
             on_epoch_end(round_index, epoch, train_loss, val_loss)
-        if since >= patience:
+        if stop:
             break
-    info = {
-        "epochs": len(train_hist),
-        "best_epoch": best_epoch,
-        "best_val_loss": float(best),
-        "train_losses": train_hist,
-        "val_losses": val_hist,
-        "batch_size": bsz,
-    }
-    return best_flow, info
+    return stopping.flow, stopping.info(bsz)

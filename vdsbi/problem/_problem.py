@@ -408,18 +408,7 @@ def make_problem(rec: Recording, vehicle: Vehicle, settings: ProblemSettings = P
         rec = _restrict(rec, settings.segment)
     # Torque mode needs a speed at each window start only: measured, else estimated.
     speed_note = start_speed(rec, vehicle.wheel_radius)[1] if issubclass(model, TorqueDriven) else None
-    windows, described = choose_windows(
-        rec,
-        wheel_radius=vehicle.wheel_radius,
-        max_window=settings.max_window,
-        burn_in=settings.burn_in,
-        torques=issubclass(model, TorqueDriven),
-        held_out=settings.held_out,
-        min_windows_to_split=settings.min_windows_to_split,
-        max_windows=settings.max_windows,
-        quiet_edges=settings.quiet_edges,
-        exclude=_limit_stretches(rec, vehicle, settings),
-    )
+    windows, described = _select_windows(rec, vehicle, model, settings)
     idx, t, u, speed, accel, v0, r0, lengths = _window_arrays(rec, windows, model, vehicle)
     decimator = _decimator(rec, model, settings)
     factor = 1 if decimator is None else decimator.factor
@@ -428,11 +417,7 @@ def make_problem(rec: Recording, vehicle: Vehicle, settings: ProblemSettings = P
     valid, train, held = _masks(windows, t_out, lengths, rec.dt, settings.burn_in)
     segments = [(w.t0, w.t1) for w in windows]
     sigma_raw, source = raw_noise_std(rec, vehicle, channels, segments)
-    warnings = list(rec.warnings) + _torque_warning(rec, vehicle, model, segments)
-    if speed_note is not None:
-        warnings.append(f"{rec.source}: vx: {speed_note}")
-        described = {**described, "initial_speed": speed_note}
-    gain = 1.0 if decimator is None else float(np.sqrt(np.sum(np.asarray(decimator.taps) ** 2)))
+    warnings, described = _warnings(rec, vehicle, model, segments, speed_note, described)
     return Problem(
         source=rec.source,
         vehicle=vehicle,
@@ -452,12 +437,47 @@ def make_problem(rec: Recording, vehicle: Vehicle, settings: ProblemSettings = P
         held=held,
         v0=v0,
         r0=r0,
-        sigma=sigma_raw * gain,
+        sigma=sigma_raw * _noise_gain(decimator),
         sigma_raw=sigma_raw,
         noise_source=source,
         description=described,
         warnings=tuple(warnings),
     )
+
+
+def _select_windows(
+    rec: Recording, vehicle: Vehicle, model: type[AbstractVehicleModel], settings: ProblemSettings
+):
+    """`choose_windows` under `settings`, leaving out the slides `_limit_stretches` names."""
+    return choose_windows(
+        rec,
+        wheel_radius=vehicle.wheel_radius,
+        max_window=settings.max_window,
+        burn_in=settings.burn_in,
+        torques=issubclass(model, TorqueDriven),
+        held_out=settings.held_out,
+        min_windows_to_split=settings.min_windows_to_split,
+        max_windows=settings.max_windows,
+        quiet_edges=settings.quiet_edges,
+        exclude=_limit_stretches(rec, vehicle, settings),
+    )
+
+
+def _warnings(
+    rec: Recording, vehicle: Vehicle, model: type[AbstractVehicleModel], segments, speed_note, described
+) -> tuple[list[str], dict]:
+    """The recording's and the torque check's warnings; an estimated start speed's note joins
+    both the warnings and the description."""
+    warnings = list(rec.warnings) + _torque_warning(rec, vehicle, model, segments)
+    if speed_note is not None:
+        warnings.append(f"{rec.source}: vx: {speed_note}")
+        described = {**described, "initial_speed": speed_note}
+    return warnings, described
+
+
+def _noise_gain(decimator) -> float:
+    """The std of white noise after the decimation filter, per unit std before (√Σ taps²)."""
+    return 1.0 if decimator is None else float(np.sqrt(np.sum(np.asarray(decimator.taps) ** 2)))
 
 
 def _torque_warning(
