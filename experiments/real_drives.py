@@ -167,7 +167,7 @@ def run_one(name: str, args, out: Path) -> dict:
     test = make_problem(rest, veh, ProblemSettings(longitudinal="speed", max_window=10.0, held_out=0.0))
     pred, ok = predict(test, est[:6], effects, eff)
     noise = np.array([s["noise_model"][c]["residual_rms"] for c in test.channels])
-    band = predictive_band(jax.random.key(0), test, res.samples[:100], noise, effects)
+    band = predictive_band(jax.random.key(0), test, res.predictive, noise, effects)
     ref = reference(name)
     lf = s["parameters"]["l_f"]
     row = {

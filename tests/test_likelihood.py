@@ -142,3 +142,21 @@ def test_a_starting_noise_model_must_be_of_the_problems_channels():
     other = NoiseModel(("ax",), np.ones(1), np.ones(1), np.ones(1), np.ones(1))
     with pytest.raises(ValueError, match="noise model"):
         fit_likelihood(prob, THETA, box, noise=other)
+
+
+def test_prediction_draws_from_the_information_and_the_intervals_from_the_widened_covariance(getkey):
+    import jax
+
+    from vdsbi.diagnostics import LikelihoodPosterior, NoiseModel
+
+    box = Box(np.array([0.0, 0.0]), np.array([1.0, 1.0]), ("a", "b"))
+    info = np.array([[0.04, 0.01], [0.01, 0.09]])
+    ones = np.ones(1)
+    noise = NoiseModel(("ay",), ones, ones, ones, ones)
+    post = LikelihoodPosterior(box, np.zeros(2), 6.0 * info, info, ("a", "b"), noise, True, (3,))
+    to_z = jax.vmap(box.to_unbounded)
+    for draws, cov in (
+        (post.predictive_draws(getkey(), 20000), info),
+        (post.sample(getkey(), 20000), 6.0 * info),
+    ):
+        np.testing.assert_allclose(np.cov(np.asarray(to_z(draws)).T), cov, rtol=0.1, atol=2e-3)

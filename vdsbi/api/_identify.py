@@ -61,6 +61,8 @@ class IdentifyResult:
         ppc: the posterior-predictive 5/50/95 % band on `validation`'s windows.
         validation: the problem whose held-out part the band and the validation scores are on
             (`problem` itself when nothing is held out).
+        predictive: (ppc_draws, P) parameter draws for predicting other driving at the estimate
+            (`vdsbi.diagnostics.LikelihoodPosterior.predictive_draws`), what `predict --band` uses.
     """
 
     posterior: Any
@@ -70,6 +72,7 @@ class IdentifyResult:
     problem: Any = None
     ppc: dict[str, Any] | None = None
     validation: Any = None
+    predictive: np.ndarray | None = None
 
     def table(self) -> str:
         """Per parameter: the estimate (the best fit, what `export` writes), the posterior's std and
@@ -209,13 +212,14 @@ def identify(
         summary["npe_check"] = _npe_check(npe_samples, checked)
         summary["validation"] = _validation(prob, checked, npe_samples, effects, compare)
         band = predictive_band(
-            k_band, prob, np.asarray(checked.sample(k_val, ppc_draws)), checked.noise.scale, effects
+            k_band, prob, np.asarray(checked.predictive_draws(k_val, ppc_draws)), checked.noise.scale, effects
         )
         summary["ppc"] = _ppc_summary(prob, band)
         summary["warnings"] = _warnings(
             samples, summary, box, names or (recording, vehicle, out_dir), longitudinal
         )
-        result = IdentifyResult(estimator, samples, summary, out, full, band, prob)
+        predictive = np.asarray(fit.predictive_draws(k_val, ppc_draws), float)
+        result = IdentifyResult(estimator, samples, summary, out, full, band, prob, predictive)
         if out is not None:
             write_outputs(out, result, prob, band)
     return result

@@ -12,7 +12,15 @@ from . import _html as H
 from .plots import display_unit
 
 #: Files `identify` leaves beside its page.
-IDENTIFY_FILES = ("posterior.json", "samples.csv", "run.json", "estimator.npz", "pairplot.png", "ppc.png")
+IDENTIFY_FILES = (
+    "posterior.json",
+    "samples.csv",
+    "predictive_draws.csv",
+    "run.json",
+    "estimator.npz",
+    "pairplot.png",
+    "ppc.png",
+)
 DIAGNOSE_FILES = ("report.json", "report.md", "residual_heatmap.png", "overlay.png", "residual_spectra.png")
 
 

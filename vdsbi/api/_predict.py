@@ -21,6 +21,7 @@ from ..problem import (
 )
 from ..simulator import Vehicle, get_effect
 from ._export import load_run
+from .outputs import PREDICTIVE
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,7 +68,7 @@ def predict(
     mask = prob.valid
     coverage, q = {}, None
     if band:
-        samples = pd.read_csv(Path(run_dir) / "samples.csv")[names].to_numpy()
+        samples = pd.read_csv(Path(run_dir) / PREDICTIVE)[names].to_numpy()
         noise = np.array([post["noise_model"][c]["residual_rms"] for c in prob.channels])
         q = predictive_band(jax.random.key(seed), prob, samples[:draws], noise, effects)
         coverage = band_coverage(prob, q, mask)

@@ -75,7 +75,8 @@ def trust_warnings(
                 "kind": "predictive_miss",
                 "channels": missed,
                 "message": f"the posterior-predictive 90 % band misses the recording on {what}; "
-                f"the model does not reproduce these channels: run `{diagnose_command}`",
+                "the model does not reproduce these channels, or (where only the held-out part is "
+                f"missed) the fitted part does not inform what they depend on: run `{diagnose_command}`",
             }
         )
     return out

@@ -27,6 +27,8 @@ from .plots import pairplot, ppc_plot
 #: Files `identify` writes into its output directory (besides `CHECKPOINT`).
 RUN_FILE = "run.json"
 ESTIMATOR = "estimator.npz"
+#: Parameter draws for predicting other driving (`predict --band`).
+PREDICTIVE = "predictive_draws.csv"
 
 
 def summarise(
@@ -55,9 +57,9 @@ def summarise(
 
 
 def write_outputs(out: Path, result: Any, prob: Any, ppc: dict[str, np.ndarray]) -> None:
-    """samples.csv, posterior.json, the estimator, pairplot.png, ppc.png and report.html of an
-    `IdentifyResult`, written into a temporary folder inside `out` and moved in only when all are
-    written."""
+    """samples.csv, predictive_draws.csv, posterior.json, the estimator, pairplot.png, ppc.png and
+    report.html of an `IdentifyResult`, written into a temporary folder inside `out` and moved in
+    only when all are written."""
     import pandas as pd
 
     tmp = Path(tempfile.mkdtemp(prefix=".outputs-", dir=out))
@@ -65,6 +67,9 @@ def write_outputs(out: Path, result: Any, prob: Any, ppc: dict[str, np.ndarray])
         names = list(result.summary["parameters"])
         pd.DataFrame(result.samples, columns=names).to_csv(
             tmp / "samples.csv", index=False, float_format="%.9g"
+        )
+        pd.DataFrame(result.predictive, columns=names).to_csv(
+            tmp / PREDICTIVE, index=False, float_format="%.9g"
         )
         (tmp / "posterior.json").write_text(result.to_json() + "\n")
         result.posterior.save(tmp / ESTIMATOR)

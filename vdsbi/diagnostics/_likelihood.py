@@ -143,6 +143,14 @@ class LikelihoodPosterior(eqx.Module):
         z = jnp.asarray(self.z, jnp.float32) + eps @ jnp.asarray(chol.T, jnp.float32)
         return jax.vmap(self.box.from_unbounded)(z)
 
+    def predictive_draws(self, key: PRNGKeyArray, n: int) -> Float[Array, "n P"]:
+        """`n` parameter draws for predicting new driving: from the drive's information alone
+        (`cov_information`). The model error enters a prediction once, through the noise model's
+        scale added to each simulated draw; the widening by the halves' disagreement keeps the
+        parameter intervals honest, and a band that also drew from it would count that error
+        twice."""
+        return self.sample(key, n, information_only=True)
+
     def mahalanobis2(self, theta) -> np.ndarray:
         """Squared Mahalanobis distance of θ (…, P) from the fit, in z (the posterior's
         50 % region is D² ≤ χ²_P(0.5))."""
