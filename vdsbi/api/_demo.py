@@ -164,27 +164,13 @@ def demo(
         base = run(rec, veh, d, name, "identify", (), rounds=b.base_rounds)
         runs, diagnosis, report = [("base model", "identify", base)], "skipped (--no-diagnose)", None
         if run_diagnosis:
-            say("3/5 diagnose: looking for missing physics")
-            report = diagnose(
-                rec,
-                veh,
-                d / "diagnose",
-                names=_names(name, "diagnose"),
-                seed=seed,
-                quiet=log is None,
-                **b.diagnose,
-            ).report
+            report = _diagnose(rec, veh, d, name, seed=seed, quiet=log is None, options=b.diagnose, say=say)
             diagnosis = _diagnosis(report)
             if report["chosen"]:
                 say(f"4/5 identify again, as diagnose says: {report['identify_command']}")
                 folder = "identify-" + "-".join(report["chosen"])
-                runs.append(
-                    (
-                        f"with {', '.join(report['chosen'])}",
-                        folder,
-                        run(rec, veh, d, name, folder, report["chosen"], priors=_measured(report)),
-                    )
-                )
+                refined = run(rec, veh, d, name, folder, report["chosen"], priors=_measured(report))
+                runs.append((f"with {', '.join(report['chosen'])}", folder, refined))
         say("5/5 the before/after page")
         _before_after(d, truth, runs, report)
         (d / "README.txt").write_text(_readme(b, runs, diagnosis))
@@ -195,6 +181,15 @@ def demo(
 def _names(name: Path, folder: str) -> tuple[Path, Path, Path]:
     """(recording, vehicle, output folder) as the user will find them."""
     return name / "recording.csv", name / "vehicle.json", name / folder
+
+
+def _diagnose(rec, veh, d: Path, name: Path, *, seed: int, quiet: bool, options: dict, say) -> dict:
+    """The diagnosis of the demo drive into d/diagnose; its report."""
+    say("3/5 diagnose: looking for missing physics")
+    res = diagnose(
+        rec, veh, d / "diagnose", names=_names(name, "diagnose"), seed=seed, quiet=quiet, **options
+    )
+    return res.report
 
 
 def _identify(rec, veh, d: Path, name: Path, folder: str, effects, *, budget, seed, progress, say, **kw):
