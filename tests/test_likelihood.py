@@ -90,7 +90,7 @@ def _halves(rng, shift, prec):
 
 
 def test_halves_that_share_one_theta_rarely_widen_and_a_moved_half_is_caught():
-    from vdsbi.diagnostics._likelihood import JOINT_LEVEL, _consistent
+    from vdsbi.diagnostics._likelihood_widening import JOINT_LEVEL, _consistent
 
     rng = np.random.default_rng(0)
     prec = np.full(3, 5.0)  # a prior strong enough that leaving its gradient out would show

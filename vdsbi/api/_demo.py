@@ -15,7 +15,8 @@ from pathlib import Path
 from ..io import output_dir
 from ._commands import measured_priors
 from ._diagnose import diagnose
-from ._identify import IdentifyResult, identify
+from ._identify import identify
+from ._identify_result import IdentifyResult
 from ._pages import demo_page
 from .outputs import plot_posterior
 from .plots import before_after_plot

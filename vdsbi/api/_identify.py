@@ -13,96 +13,32 @@ from typing import Any
 
 import numpy as np
 
-from .. import __version__
 from ..diagnostics import fit_likelihood
 from ..io import InputError, SimulationError
 from ..problem import (
     Box,
     Problem,
     ProblemSettings,
-    band_coverage,
     concat_problems,
     grip_used,
     longitudinal_mode,
     make_problem,
     parameter_names,
-    parameter_units,
     predictive_band,
     prior_box,
-    split_parameters,
-    validate,
 )
 from ..simulator import SpeedDriven, model_class, release_compiled_programs
-from ._commands import diagnose_command
+from ._identify_report import _npe_check, _ppc_summary, _summary, _validation, _warnings
+from ._identify_result import IdentifyResult
 from ._progress import Progress
-from ._trust import model_error_warning, trust_warnings
 from .outputs import (
     CHECKPOINT,
     ESTIMATOR,
     RUN_FILE,
     checkpoint_dir,
-    summarise,
     write_outputs,
     write_text_atomically,
 )
-
-
-@dataclasses.dataclass
-class IdentifyResult:
-    """What `identify` found.
-
-    Attributes:
-        posterior: the trained neural posterior (`vdsbi.inference.Posterior`), for `vdsbi sample`.
-        samples: (num_samples, P) draws of the reported (likelihood) posterior, names order.
-        summary: the content of posterior.json (parameters with their estimate, noise model,
-            combinations, validation, predictive check, warnings).
-        out_dir: where the files were written, or None.
-        problem: the whole drive's `vdsbi.problem.Problem` (every usable window).
-        ppc: the posterior-predictive 5/50/95 % band on `validation`'s windows.
-        validation: the problem whose held-out part the band and the validation scores are on
-            (`problem` itself when nothing is held out).
-        predictive: (ppc_draws, P) parameter draws for predicting other driving at the estimate
-            (`vdsbi.diagnostics.LikelihoodPosterior.predictive_draws`), what `predict --band` uses.
-    """
-
-    posterior: Any
-    samples: np.ndarray
-    summary: dict[str, Any]
-    out_dir: Path | None = None
-    problem: Any = None
-    ppc: dict[str, Any] | None = None
-    validation: Any = None
-    predictive: np.ndarray | None = None
-
-    def table(self) -> str:
-        """Per parameter: the estimate (the best fit, what `export` writes), the posterior's std and
-        5/50/95 % quantiles; a parameter the drive cannot inform is printed as "not identified"
-        with its prior range; then the combinations the drive determines and the warnings."""
-        width = max(10, *(len(n) for n in self.summary["parameters"]))
-        rows = [f"{'param':<{width}} {'estimate':>11} {'std':>10} {'q05':>11} {'q50':>11} {'q95':>11}"]
-        for name, p in self.summary["parameters"].items():
-            if p.get("identified") is False:
-                lo, hi = p["prior"]
-                rows.append(f"{name:<{width}} not identified by this drive (prior {lo:.4g} .. {hi:.4g})")
-                continue
-            rows.append(
-                f"{name:<{width}} {p['estimate']:>11.4g} {p['std']:>10.3g} "
-                f"{p['q05']:>11.4g} {p['q50']:>11.4g} {p['q95']:>11.4g}"
-            )
-        for key, c in self.summary.get("combinations", {}).items():
-            if key == "determined_directions":
-                continue
-            at = f" at {c['at']} m/s" if c.get("at") else ""
-            told = "" if c.get("identified", True) else " (not identified: near its prior spread)"
-            rows.append(
-                f"{key.replace('_', ' ')}{at}: {c['median']:.4g} {c['unit']} "
-                f"[95 %: {c['q025']:.4g} .. {c['q975']:.4g}]{told}"
-            )
-        rows += [f"WARNING: {w['message']}" for w in self.summary.get("warnings", ())]
-        return "\n".join(rows)
-
-    def to_json(self) -> str:
-        return json.dumps(self.summary, indent=2)
 
 
 def identify(
@@ -421,166 +357,6 @@ def _starts(npe_samples: np.ndarray, box: Box) -> np.ndarray:
     view of where the data put θ) and the prior centre."""
     centre = np.asarray(box.low + 0.5 * box.width)
     return np.concatenate([npe_samples.mean(0)[None], centre[None], npe_samples[:STARTS]])
-
-
-def _summary(full: Problem, samples, fit, state, run_info: dict, box: Box, effects, veh) -> dict[str, Any]:
-    """posterior.json's core: the reported posterior (the likelihood one on all the driving), the
-    estimate (its best fit), the noise model, what the drive cannot inform and what it does."""
-    import jax
-
-    from ..diagnostics import MAX_STD_RATIO, determined_directions, vehicle_combinations
-
-    names = box.names
-    bounds = {n: (float(a), float(b)) for n, a, b in zip(names, box.low, box.high)}
-    params = summarise(samples, bounds, names, parameter_units(effects))
-    # Identified by what the drive informs (before model error widens the interval: a parameter
-    # the data pin down stays identified, with an interval that says the model misses something).
-    informed = np.asarray(fit.sample(jax.random.key(2), len(samples), information_only=True), float)
-    informed_std = np.std(informed, axis=0)
-    for i, n in enumerate(names):
-        prior_std = float(box.width[i]) / np.sqrt(12.0)
-        ratio = float(informed_std[i]) / prior_std
-        params[n]["estimate"] = float(fit.theta[i])
-        params[n]["identified"] = bool(n in fit.free and ratio <= MAX_STD_RATIO)
-        if n not in fit.free:
-            params[n]["not_identified_because"] = "the channels do not depend on it in this mode"
-        elif ratio > MAX_STD_RATIO:
-            params[n]["not_identified_because"] = f"the drive leaves {ratio:.0%} of its prior std"
-        if n in fit.disagreement:
-            d = fit.disagreement[n]
-            params[n]["model_error"] = (
-                f"the data's halves ({d['split']}) disagree on it by {d['sigmas']:.1f} standard deviations: "
-                "the model lacks something that moves it; its interval is widened by the disagreement"
-            )
-    speed = full.speed if full.speed is not None else np.broadcast_to(full.v0[:, None], full.t.shape)
-    rms_speed = float(np.sqrt(np.mean(np.asarray(speed)[:, :: full.factor][full.train] ** 2)))
-    prior = np.random.default_rng(0).uniform(box.low, box.high, (4000, box.dim))
-    return {
-        "vdsbi_version": __version__,
-        "recording": run_info["recording"],
-        "parameters": params,
-        "estimate": {
-            "values": {n: float(v) for n, v in zip(names, fit.theta)},
-            "method": "best fit of all the usable driving through the simulator (maximum a posteriori "
-            "under the noise model below); the reported posterior is the Laplace approximation there",
-            "converged": fit.converged,
-            "halves_disagree": None
-            if fit.inconsistency is None
-            else fit.inconsistency
-            | {
-                "what": "two halves of the data cannot share one θ (D² of their difference beyond "
-                "χ²'s 95 % point): the model lacks something, and the covariance is scaled by D²/P"
-            },
-        },
-        "noise_model": fit.noise.to_dict(),
-        "not_identified": [n for n in names if params[n]["identified"] is False],
-        "combinations": vehicle_combinations(samples, names, veh, rms_speed, prior, informed)
-        | {"determined_directions": determined_directions(samples, prior, names, fit.free)},
-        "effects": list(effects),
-        "problem": full.summary(),
-        "channels": list(full.channels),
-        "seed": run_info["seed"],
-        "settings": run_info["settings"],
-        "rounds": [{k: v for k, v in h.items() if isinstance(v, (int, float, str))} for h in state.history],
-    }
-
-
-def _npe_check(npe_samples: np.ndarray, checked) -> dict[str, Any]:
-    """The neural posterior against the likelihood posterior of the same (training) data: the
-    squared Mahalanobis distance of its mean, in the likelihood posterior's logit coordinates
-    (≤ χ²_P(0.5): inside its 50 % region), and each parameter's std ratio."""
-    from scipy.stats import chi2
-
-    d2 = float(checked.mahalanobis2(npe_samples.mean(0))[0])
-    limit = float(chi2.ppf(0.5, len(checked.z)))
-    import jax
-
-    lik = np.asarray(checked.sample(jax.random.key(1), 2000), float)
-    spread = np.std(npe_samples, axis=0) / (np.std(lik, axis=0) + 1e-300)
-    ratio = {n: float(r) for n, r in zip(checked.names, spread)}
-    agree = d2 <= limit and all(0.5 <= r <= 2.0 for n, r in ratio.items() if n in checked.free)
-    return {
-        "mahalanobis2_of_npe_mean": d2,
-        "chi2_50pct": limit,
-        "std_ratio_npe_to_likelihood": ratio,
-        "agree": bool(agree),
-        "reported": "likelihood",
-        "why": "the neural posterior is trained on simulations with sensor noise only; the likelihood "
-        "posterior carries the model error the fit measured, and its best fit is the estimate",
-    }
-
-
-def _validation(prob: Problem, checked, npe_samples: np.ndarray, effects, compare) -> dict[str, Any]:
-    """Held-out scores of the training fit (the estimate's validation) and of the neural
-    posterior's mean; the user's reference values beside them (parameters a reference does not
-    give are taken from the fit)."""
-    if not prob.held.any():
-        return {}
-    names = parameter_names(effects)
-    out = {
-        "estimate": _score(prob, checked.theta, effects),
-        "npe_mean": _score(prob, npe_samples.mean(0), effects),
-        "what": "fitted on the training part, scored on the held-out part; the exported estimate "
-        "is then refit on all the driving",
-    }
-    if compare:
-        unknown = [k for k in compare if k not in names]
-        if unknown:
-            raise InputError(
-                "settings", "--compare", f"unknown parameter {unknown[0]!r}; known: {', '.join(names)}"
-            )
-        ref = np.array([float(compare.get(n, m)) for n, m in zip(names, checked.theta)])
-        out["reference"] = _score(prob, ref, effects) | {"given": {k: float(v) for k, v in compare.items()}}
-    return out
-
-
-def _warnings(samples: np.ndarray, summary: dict, box: Box, names, longitudinal: str) -> list[dict[str, Any]]:
-    """posterior.json's `warnings`: mass piled at the prior's edges, or a predictive band that
-    misses the recording, each pointing to `vdsbi diagnose`."""
-    rec, veh, out = (n if isinstance(n, (str, os.PathLike)) else None for n in names)
-    if rec is None:
-        rec = summary["recording"]
-    ppc = summary["ppc"]
-    bounds = {n: (float(a), float(b)) for n, a, b in zip(box.names, box.low, box.high)}
-    problem = [{"kind": "recording", "message": w} for w in summary["problem"].get("warnings", ())]
-    command = diagnose_command(rec, veh, out, longitudinal)
-    coverage = {
-        "train": ppc["fraction_inside_90pct_band"],
-        "held_out": ppc["fraction_inside_90pct_band_held_out"],
-    }
-    return (
-        problem
-        + trust_warnings(
-            samples,
-            list(summary["parameters"]),
-            bounds,
-            summary["not_identified"],
-            coverage,
-            command,
-        )
-        + model_error_warning(summary["noise_model"], command)
-    )
-
-
-def _score(prob: Problem, values: np.ndarray, effects) -> dict[str, Any]:
-    from ..simulator import get_effect
-
-    theta, ep = split_parameters(values, effects)
-    eff_values = {
-        e: {p: float(v) for p, v in zip(get_effect(e).param_names, np.asarray(x))}
-        for e, x in zip(effects, ep)
-    }
-    return validate(prob, np.asarray(theta), effects, eff_values)
-
-
-def _ppc_summary(prob: Problem, band: dict[str, Any]) -> dict[str, Any]:
-    return {
-        "draws": int(band["n"]),
-        "noise": "the likelihood fit's noise model (model error included)",
-        # None when no posterior draw simulated successfully (no band to compare with).
-        "fraction_inside_90pct_band": band_coverage(prob, band, prob.train),
-        "fraction_inside_90pct_band_held_out": band_coverage(prob, band, prob.held),
-    }
 
 
 def sample(run_dir: str | os.PathLike, n: int, *, seed: int = 0):

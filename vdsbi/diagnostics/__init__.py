@@ -13,8 +13,6 @@ from ._combinations import (
 from ._design import (
     DesignProblem as DesignProblem,
     DesignResult as DesignResult,
-    Limits as Limits,
-    Maneuver as Maneuver,
     check_limits as check_limits,
     design_maneuver as design_maneuver,
     design_problem as design_problem,
@@ -23,14 +21,13 @@ from ._fisher import (
     Fisher as Fisher,
     fisher_from_jacobian as fisher_from_jacobian,
     fisher_information as fisher_information,
-    fisher_report as fisher_report,
     model_fisher as model_fisher,
     noise_model as noise_model,
     noise_std as noise_std,
     param_names as param_names,
-    report_markdown as report_markdown,
     score_fisher_mc as score_fisher_mc,
 )
+from ._fisher_report import fisher_report as fisher_report, report_markdown as report_markdown
 from ._identifiability import MAX_STD_RATIO as MAX_STD_RATIO, identifiability as identifiability
 from ._least_squares import (
     FitResult as FitResult,
@@ -44,6 +41,7 @@ from ._likelihood import (
     NoiseModel as NoiseModel,
     fit_likelihood as fit_likelihood,
 )
+from ._maneuver import Limits as Limits, Maneuver as Maneuver
 from ._misspecification import (
     Localisation as Localisation,
     MisspecificationTest as MisspecificationTest,

@@ -9,6 +9,8 @@ from ._bag import (
     read_bag as read_bag,
 )
 from ._bag_writer import write_bag as write_bag
+from ._consistency import kinematic_slopes as kinematic_slopes
+from ._contract import LIMITS as LIMITS, build_recording as build_recording
 from ._csv import read_csv as read_csv
 from ._drive import (
     check_against_vehicle as check_against_vehicle,
@@ -24,13 +26,7 @@ from ._files import (
     write_text_atomically as write_text_atomically,
 )
 from ._parquet import read_parquet as read_parquet
-from ._recording import (
-    LIMITS as LIMITS,
-    Recording as Recording,
-    build_recording as build_recording,
-    kinematic_slopes as kinematic_slopes,
-    speed_slope as speed_slope,
-)
+from ._recording import Recording as Recording, speed_slope as speed_slope
 from ._resample import running_mean as running_mean
 from ._segments import (
     Segment as Segment,

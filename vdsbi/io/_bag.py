@@ -12,8 +12,9 @@ from typing import Any
 import numpy as np
 
 from ..simulator import CHANNELS, INPUTS
+from ._contract import build_recording
 from ._errors import InputError
-from ._recording import SPEED_CHANNELS, TORQUES, Recording, build_recording
+from ._recording import SPEED_CHANNELS, TORQUES, Recording
 
 #: Autoware message definitions (autoware_vehicle_msgs), not in rosbags' built-in typestores.
 AUTOWARE_MSGS: dict[str, str] = {

@@ -8,8 +8,9 @@ import os
 import numpy as np
 import pandas as pd
 
+from ._contract import _is_number, build_recording
 from ._errors import InputError
-from ._recording import Recording, _is_number, build_recording
+from ._recording import Recording
 
 
 def read_csv_columns(path: str | os.PathLike) -> dict[str, np.ndarray]:

@@ -6,8 +6,9 @@ import os
 
 import numpy as np
 
+from ._contract import build_recording
 from ._errors import InputError
-from ._recording import Recording, build_recording
+from ._recording import Recording
 
 
 def read_parquet_columns(path: str | os.PathLike) -> dict[str, np.ndarray]:

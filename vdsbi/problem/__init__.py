@@ -3,6 +3,7 @@
 from ._box import Box as Box
 from ._concat import concat_problems as concat_problems
 from ._limit import slides as slides
+from ._make import longitudinal_mode as longitudinal_mode, make_problem as make_problem
 from ._measured import (
     measured_longitudinal as measured_longitudinal,
     smoothed_yaw_rate as smoothed_yaw_rate,
@@ -23,8 +24,6 @@ from ._problem import (
     Problem as Problem,
     ProblemSettings as ProblemSettings,
     grip_used as grip_used,
-    longitudinal_mode as longitudinal_mode,
-    make_problem as make_problem,
 )
 from ._simulate import (
     WindowedModel as WindowedModel,

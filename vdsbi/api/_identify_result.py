@@ -1,0 +1,70 @@
+"""`IdentifyResult`: what `identify` returns — the neural posterior, the reported posterior's
+draws, posterior.json's content, the problems it was fitted and validated on, the predictive band
+and the draws for predicting other driving — with `table` (the printed summary) and `to_json`."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+@dataclasses.dataclass
+class IdentifyResult:
+    """What `identify` found.
+
+    Attributes:
+        posterior: the trained neural posterior (`vdsbi.inference.Posterior`), for `vdsbi sample`.
+        samples: (num_samples, P) draws of the reported (likelihood) posterior, names order.
+        summary: the content of posterior.json (parameters with their estimate, noise model,
+            combinations, validation, predictive check, warnings).
+        out_dir: where the files were written, or None.
+        problem: the whole drive's `vdsbi.problem.Problem` (every usable window).
+        ppc: the posterior-predictive 5/50/95 % band on `validation`'s windows.
+        validation: the problem whose held-out part the band and the validation scores are on
+            (`problem` itself when nothing is held out).
+        predictive: (ppc_draws, P) parameter draws for predicting other driving at the estimate
+            (`vdsbi.diagnostics.LikelihoodPosterior.predictive_draws`), what `predict --band` uses.
+    """
+
+    posterior: Any
+    samples: np.ndarray
+    summary: dict[str, Any]
+    out_dir: Path | None = None
+    problem: Any = None
+    ppc: dict[str, Any] | None = None
+    validation: Any = None
+    predictive: np.ndarray | None = None
+
+    def table(self) -> str:
+        """Per parameter: the estimate (the best fit, what `export` writes), the posterior's std and
+        5/50/95 % quantiles; a parameter the drive cannot inform is printed as "not identified"
+        with its prior range; then the combinations the drive determines and the warnings."""
+        width = max(10, *(len(n) for n in self.summary["parameters"]))
+        rows = [f"{'param':<{width}} {'estimate':>11} {'std':>10} {'q05':>11} {'q50':>11} {'q95':>11}"]
+        for name, p in self.summary["parameters"].items():
+            if p.get("identified") is False:
+                lo, hi = p["prior"]
+                rows.append(f"{name:<{width}} not identified by this drive (prior {lo:.4g} .. {hi:.4g})")
+                continue
+            rows.append(
+                f"{name:<{width}} {p['estimate']:>11.4g} {p['std']:>10.3g} "
+                f"{p['q05']:>11.4g} {p['q50']:>11.4g} {p['q95']:>11.4g}"
+            )
+        for key, c in self.summary.get("combinations", {}).items():
+            if key == "determined_directions":
+                continue
+            at = f" at {c['at']} m/s" if c.get("at") else ""
+            told = "" if c.get("identified", True) else " (not identified: near its prior spread)"
+            rows.append(
+                f"{key.replace('_', ' ')}{at}: {c['median']:.4g} {c['unit']} "
+                f"[95 %: {c['q025']:.4g} .. {c['q975']:.4g}]{told}"
+            )
+        rows += [f"WARNING: {w['message']}" for w in self.summary.get("warnings", ())]
+        return "\n".join(rows)
+
+    def to_json(self) -> str:
+        return json.dumps(self.summary, indent=2)
