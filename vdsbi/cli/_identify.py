@@ -142,7 +142,10 @@ def run(args) -> int:
             print(f"vdsbi: warning: {w['message']}", file=sys.stderr)
     else:
         print(res.table())
-        print(f"wrote {args.out}/posterior.json, samples.csv, pairplot.png, ppc.png, {api.outputs.ESTIMATOR}")
+        print(
+            f"wrote {args.out}/posterior.json, samples.csv, {api.outputs.PREDICTIVE}, pairplot.png, ppc.png, "
+            f"{api.outputs.ESTIMATOR}"
+        )
     return 0
 
 
