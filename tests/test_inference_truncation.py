@@ -20,7 +20,7 @@ from vdsbi.inference import (
     apt,
     build_flow,
 )
-from vdsbi.inference._posterior import _log_prob
+from vdsbi.inference._posterior import flow_log_prob
 
 FLOW = SplineFlowSettings(num_layers=2, num_bins=4, hidden=8, theta_map=IdentityMap())
 SAMPLES = 4000  # posterior draws that locate the region's level
@@ -66,7 +66,7 @@ def test_ellipsoid_and_prior_rejection_draw_the_same_truncated_prior(getkey, mon
     assert np.asarray(by_prior).max() > 4.95  # the box cuts the region
     for a, b in zip(np.asarray(by_prior).T, np.asarray(by_ell).T, strict=True):
         assert stats.ks_2samp(a, b).pvalue > 1e-3
-    lp_p, lp_e = (np.asarray(_log_prob(flow, t, x_o)) for t in (by_prior, by_ell))
+    lp_p, lp_e = (np.asarray(flow_log_prob(flow, t, x_o)) for t in (by_prior, by_ell))
     assert stats.ks_2samp(lp_p, lp_e).pvalue > 1e-3
 
 
@@ -76,7 +76,7 @@ def test_auto_reaches_a_ten_dimensional_region_without_posterior_draws(getkey):
     theta, info = _truncation.truncated_prior(getkey(), flow, prior, x_o, 1000, num_samples=SAMPLES)
     assert info["region_proposal"] == "ellipsoid" and info["region_covered"]
     assert info["num_filled"] == 0 and theta.shape == (1000, 10)
-    assert np.all(np.isfinite(np.asarray(_log_prob(flow, theta, x_o))))
+    assert np.all(np.isfinite(np.asarray(flow_log_prob(flow, theta, x_o))))
 
 
 def test_unreachable_region_is_filled_from_the_wider_proposal_and_warned(getkey, monkeypatch):

@@ -90,20 +90,20 @@ def _halves(rng, shift, prec):
 
 
 def test_halves_that_share_one_theta_rarely_widen_and_a_moved_half_is_caught():
-    from vdsbi.diagnostics._likelihood_widening import JOINT_LEVEL, _consistent
+    from vdsbi.diagnostics._likelihood_widening import JOINT_LEVEL, consistent_covariance
 
     rng = np.random.default_rng(0)
     prec = np.full(3, 5.0)  # a prior strong enough that leaving its gradient out would show
     rejected = 0
     for _ in range(300):
         args, splits, _ = _halves(rng, 0.0, prec)
-        cov, shifts, joint = _consistent(*args, splits)
+        cov, shifts, joint = consistent_covariance(*args, splits)
         rejected += joint is not None
         if joint is None and not shifts:
             np.testing.assert_array_equal(cov, args[0])  # consistent halves leave it as it was
     assert abs(rejected / 300 - (1 - JOINT_LEVEL)) < 0.03  # the test's level under a right model
     args, splits, exact = _halves(rng, 0.4, prec)
-    cov, shifts, joint = _consistent(*args, splits)
+    cov, shifts, joint = consistent_covariance(*args, splits)
     assert joint is not None and joint["scale"] == joint["D2"] / 3 > 1.0
     assert list(shifts) == [0] and shifts[0]["z_shift"] == pytest.approx(abs(exact[0]), rel=1e-6)
     assert np.all(np.diag(cov) > joint["scale"] * np.diag(args[0]) - 1e-12)

@@ -28,7 +28,7 @@ from ..problem import (
     prior_box,
 )
 from ..simulator import SpeedDriven, model_class, release_compiled_programs
-from ._identify_report import _npe_check, _ppc_summary, _summary, _validation, _warnings
+from ._identify_report import npe_check, ppc_summary, run_summary, run_warnings, validation_report
 from ._identify_result import IdentifyResult
 from ._progress import Progress
 from .outputs import (
@@ -143,18 +143,19 @@ def identify(
                 full, np.concatenate([checked.theta[None], starts]), box, effects=effects, noise=checked.noise
             )
         samples = np.asarray(fit.sample(k_post, settings.num_samples), float)
-        summary = _summary(full, samples, fit, state, run_info, box, effects, veh)
+        summary = run_summary(full, samples, fit, state, run_info, box, effects, veh)
         summary["vehicle"] = veh.to_dict()  # the constants `vdsbi export` needs beside θ
-        summary["npe_check"] = _npe_check(npe_samples, checked)
-        summary["validation"] = _validation(prob, checked, npe_samples, effects, compare)
+        summary["npe_check"] = npe_check(npe_samples, checked)
+        summary["validation"] = validation_report(prob, checked, npe_samples, effects, compare)
         band = predictive_band(
             k_band, prob, np.asarray(checked.predictive_draws(k_val, ppc_draws)), checked.noise.scale, effects
         )
-        summary["ppc"] = _ppc_summary(prob, band)
-        summary["warnings"] = _warnings(
+        summary["ppc"] = ppc_summary(prob, band)
+        summary["warnings"] = run_warnings(
             samples, summary, box, names or (recording, vehicle, out_dir), longitudinal
         )
-        predictive = np.asarray(fit.predictive_draws(k_val, ppc_draws), float)
+        # Its own key: the exported draws are not the validation band's draws of another fit.
+        predictive = np.asarray(fit.predictive_draws(jax.random.fold_in(k_val, 1), ppc_draws), float)
         result = IdentifyResult(estimator, samples, summary, out, full, band, prob, predictive)
         if out is not None:
             write_outputs(out, result, prob, band)

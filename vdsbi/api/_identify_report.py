@@ -1,8 +1,8 @@
-"""What `identify` writes into posterior.json beside the run's settings: `_summary` (the reported
+"""What `identify` writes into posterior.json beside the run's settings: `run_summary` (the reported
 posterior per parameter, the estimate, the noise model, what the drive cannot inform and the
-combinations it determines), `_npe_check` (the neural posterior against the likelihood one),
-`_validation` (held-out scores of the estimate, the neural mean and any reference values),
-`_ppc_summary` (the predictive band's coverage) and `_warnings` (each pointing to `vdsbi
+combinations it determines), `npe_check` (the neural posterior against the likelihood one),
+`validation_report` (held-out scores of the estimate, the neural mean and any reference values),
+`ppc_summary` (the predictive band's coverage) and `run_warnings` (each pointing to `vdsbi
 diagnose`). Each takes the fitted objects and returns plain JSON-ready dicts and lists."""
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from ._trust import model_error_warning, trust_warnings
 from .outputs import summarise
 
 
-def _summary(full: Problem, samples, fit, state, run_info: dict, box: Box, effects, veh) -> dict[str, Any]:
+def run_summary(full: Problem, samples, fit, state, run_info: dict, box: Box, effects, veh) -> dict[str, Any]:
     """posterior.json's core: the reported posterior (the likelihood one on all the driving), the
     estimate (its best fit), the noise model, what the drive cannot inform and what it does."""
     import jax
@@ -90,7 +90,7 @@ def _summary(full: Problem, samples, fit, state, run_info: dict, box: Box, effec
     }
 
 
-def _npe_check(npe_samples: np.ndarray, checked) -> dict[str, Any]:
+def npe_check(npe_samples: np.ndarray, checked) -> dict[str, Any]:
     """The neural posterior against the likelihood posterior of the same (training) data: the
     squared Mahalanobis distance of its mean, in the likelihood posterior's logit coordinates
     (≤ χ²_P(0.5): inside its 50 % region), and each parameter's std ratio."""
@@ -115,7 +115,7 @@ def _npe_check(npe_samples: np.ndarray, checked) -> dict[str, Any]:
     }
 
 
-def _validation(prob: Problem, checked, npe_samples: np.ndarray, effects, compare) -> dict[str, Any]:
+def validation_report(prob: Problem, checked, npe_samples: np.ndarray, effects, compare) -> dict[str, Any]:
     """Held-out scores of the training fit (the estimate's validation) and of the neural
     posterior's mean; the user's reference values beside them (parameters a reference does not
     give are taken from the fit)."""
@@ -139,7 +139,9 @@ def _validation(prob: Problem, checked, npe_samples: np.ndarray, effects, compar
     return out
 
 
-def _warnings(samples: np.ndarray, summary: dict, box: Box, names, longitudinal: str) -> list[dict[str, Any]]:
+def run_warnings(
+    samples: np.ndarray, summary: dict, box: Box, names, longitudinal: str
+) -> list[dict[str, Any]]:
     """posterior.json's `warnings`: mass piled at the prior's edges, or a predictive band that
     misses the recording, each pointing to `vdsbi diagnose`."""
     rec, veh, out = (n if isinstance(n, (str, os.PathLike)) else None for n in names)
@@ -178,7 +180,7 @@ def _score(prob: Problem, values: np.ndarray, effects) -> dict[str, Any]:
     return validate(prob, np.asarray(theta), effects, eff_values)
 
 
-def _ppc_summary(prob: Problem, band: dict[str, Any]) -> dict[str, Any]:
+def ppc_summary(prob: Problem, band: dict[str, Any]) -> dict[str, Any]:
     return {
         "draws": int(band["n"]),
         "noise": "the likelihood fit's noise model (model error included)",

@@ -39,7 +39,7 @@ from ..problem import (
 )
 from ..simulator import Solver
 from ._least_squares import laplace_covariance, levenberg_marquardt
-from ._likelihood_widening import BLOCK_TAUS, _consistent, _robust, _splits
+from ._likelihood_widening import BLOCK_TAUS, consistent_covariance, data_splits, robust_covariance
 
 #: Std of the Gaussian standing in for the uniform prior in each logit coordinate (the logistic
 #: distribution's: a uniform θ is logistic in z).
@@ -101,17 +101,17 @@ class LikelihoodPosterior(eqx.Module):
         z: (P,) the best fit (MAP) in logit coordinates.
         cov_z: (P, P) covariance of z (Laplace, widened by the model error the data reveal);
             parameters not fitted keep their prior variance.
-        cov_information: (P, P) the same before the halves' disagreement widens it (`_consistent`):
+        cov_information: (P, P) the same before the halves' disagreement widens it (`consistent_covariance`):
             what the drive's information alone allows, which the identifiability rule reads.
         free: names of the fitted parameters (the others carry no information in this drive).
         noise: the noise model the fit ended with.
         converged: the last fit stopped by its tolerance, not its iteration cap.
         steps: iterations of each reweighted fit.
         disagreement: {name: {"split", "z_shift"}} for parameters on which two halves of the data
-            (`_splits`) disagree beyond their uncertainty: the model lacks something that moves
-            them, and their variance was widened by the disagreement (`_consistent`).
+            (`data_splits`) disagree beyond their uncertainty: the model lacks something that moves
+            them, and their variance was widened by the disagreement (`consistent_covariance`).
         inconsistency: {"split", "D2", "scale"} when two halves of the data cannot share one θ
-            (`_consistent`): the covariance was scaled by "scale"; None when they can.
+            (`consistent_covariance`): the covariance was scaled by "scale"; None when they can.
     """
 
     box: Box
@@ -238,10 +238,10 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
     prec = np.full(len(idx), PRIOR_Z_STD**-2)
     flat = (jac / np.sqrt(tau)[:, None]).reshape(-1, len(idx))
     cov_free = np.asarray(laplace_covariance(jnp.asarray(flat), prec))
-    informed = _robust(cov_free, jac, resid / scale, mask, prec, BLOCK_TAUS * float(tau.max()))
-    splits = _splits(data, mask)
+    informed = robust_covariance(cov_free, jac, resid / scale, mask, prec, BLOCK_TAUS * float(tau.max()))
+    splits = data_splits(data, mask)
     root_tau = np.sqrt(tau)
-    cov_free, shifts, joint = _consistent(
+    cov_free, shifts, joint = consistent_covariance(
         informed, jac / root_tau[:, None], resid / scale / root_tau, np.asarray(z), prec, splits
     )
     cov, cov_info = (np.diag(np.full(len(names), PRIOR_Z_STD**2)) for _ in range(2))

@@ -1,7 +1,7 @@
 """How the likelihood posterior's Laplace covariance is widened by the model error the data
-reveal: `_robust` takes each parameter's variance up to the block-sandwich estimate of how much
-the fit moves between stretches of driving, `_splits` names the ways to halve the fitted samples
-(by channel, by excitation, by time), and `_consistent` scales the covariance when two halves
+reveal: `robust_covariance` takes each parameter's variance up to the block-sandwich estimate of how much
+the fit moves between stretches of driving, `data_splits` names the ways to halve the fitted samples
+(by channel, by excitation, by time), and `consistent_covariance` scales the covariance when two halves
 cannot share one θ and adds a parameter's squared shift to its variance where they disagree on
 it. Each takes whitened Jacobians and residuals as numpy arrays and returns the widened
 covariance."""
@@ -17,7 +17,7 @@ from ..problem import Problem
 BLOCK_TAUS = 4.0
 
 
-def _robust(cov: np.ndarray, jac: np.ndarray, r: np.ndarray, mask: np.ndarray, prec, block: float):
+def robust_covariance(cov: np.ndarray, jac: np.ndarray, r: np.ndarray, mask: np.ndarray, prec, block: float):
     """`cov` widened where the residual's effect on the fit varies more than it allows.
 
     The block sandwich H⁻¹(Σ_b g_b g_bᵀ)H⁻¹ (H = JᵀJ + prior precision, g_b = J_bᵀr_b the score
@@ -59,7 +59,7 @@ DISAGREE_Z = 2.0
 JOINT_LEVEL = 0.95
 
 
-def _splits(data: Problem, mask: np.ndarray) -> list[tuple[str, np.ndarray]]:
+def data_splits(data: Problem, mask: np.ndarray) -> list[tuple[str, np.ndarray]]:
     """Ways to halve the fitted samples, as (name, (W, K, C) mask of half A; half B is the rest):
     by channel (a_y against yaw rate), by excitation (the samples with the larger measured lateral
     motion), and by time (the first windows against the last). A right model explains each half
@@ -81,7 +81,7 @@ def _splits(data: Problem, mask: np.ndarray) -> list[tuple[str, np.ndarray]]:
     return out
 
 
-def _consistent(cov: np.ndarray, jac: np.ndarray, r: np.ndarray, z: np.ndarray, prec, splits):
+def consistent_covariance(cov: np.ndarray, jac: np.ndarray, r: np.ndarray, z: np.ndarray, prec, splits):
     """`cov` widened where halves of the data disagree.
 
     Each half's estimate is one Newton step from the joint fit ẑ, each half with half the prior:
@@ -100,7 +100,7 @@ def _consistent(cov: np.ndarray, jac: np.ndarray, r: np.ndarray, z: np.ndarray, 
         r: (W, K, C) those residuals.
         z: (P,) the joint fit.
         prec: (P,) prior precision.
-        splits: `_splits`.
+        splits: `data_splits`.
 
     Returns:
         the widened covariance, {parameter index: {"split", "z_shift", "sigmas"}} and

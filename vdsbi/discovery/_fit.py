@@ -108,7 +108,7 @@ def _readings(wm: WindowedModel, space: Space, z, active) -> Float[Array, "W K C
     return ys
 
 
-def _whitened(space: Space, target: _Target, z, active):
+def whitened(space: Space, target: _Target, z, active):
     r = (_readings(target.wm, space, z, active) - target.measured) / target.sigma
     r = jnp.where(target.mask[:, :, None] > 0, r, 0.0)
     return r.reshape(-1)
@@ -128,7 +128,7 @@ def _readings_jacobian(wm, space, z, active, free):
 def _fit_free(space, target, z, active, free, prec, max_iter, tol):
     """Levenberg–Marquardt over the entries `free` of z (padded with an out-of-range index,
     whose slots nothing reads: their prior keeps them at 0)."""
-    fn = lambda y: _whitened(space, target, z.at[free].set(y, mode="drop"), active)
+    fn = lambda y: whitened(space, target, z.at[free].set(y, mode="drop"), active)
     y0 = jnp.where(free < z.size, z[jnp.minimum(free, z.size - 1)], 0.0)
     return levenberg_marquardt(
         fn, y0, prior_precision=prec, max_steps=max_iter, rtol=tol, max_step=MAX_Z_STEP

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..simulator import TERMS, term_effect, term_formula
 from ._candidates import effect_space
-from ._fit import Fitter, _whitened
+from ._fit import Fitter, whitened
 from ._rank import STRONG, bic_score, claim_limit, worst_channel
 from ._results import DiscoveryFit, TermDiscovery
 
@@ -36,7 +36,7 @@ TERM_EFFECT = "discovered_terms"
 
 @eqx.filter_jit
 def _jacobian(space, target, z, active, free):
-    fn = lambda y: _whitened(space, target, z.at[free].set(y), active)
+    fn = lambda y: whitened(space, target, z.at[free].set(y), active)
     y0 = z[free]
     return fn(y0), jax.jacfwd(fn)(y0)
 

@@ -17,7 +17,7 @@ from ._config import FlowMatchingSettings, NPEConfig, SequentialSettings, Traini
 from ._embeddings import AbstractEmbedding
 from ._flow import ConditionalFlow
 from ._loss import AtomicLoss
-from ._posterior import Posterior, _sample, on_one_device
+from ._posterior import Posterior, on_one_device, sample_flow
 from ._prior import BoxPrior
 from ._sharding import data_mesh
 from ._train import fit
@@ -161,7 +161,7 @@ def _propose(
         return theta, {"proposal": "truncated_prior", **tinfo}
     k_draw, k_mass = jax.random.split(key)
     mass = float(_box_mass(flow, k_mass, problem.x_o, _BOX_MASS_DRAWS))
-    return _sample(flow, k_draw, problem.x_o, n), {"proposal": "posterior", "box_mass": mass}
+    return sample_flow(flow, k_draw, problem.x_o, n), {"proposal": "posterior", "box_mass": mass}
 
 
 _BOX_MASS_DRAWS = 10_000

@@ -22,12 +22,12 @@ def on_one_device(x):
 
 
 @eqx.filter_jit
-def _sample(flow, key, x, n):
+def sample_flow(flow, key, x, n):
     return flow.sample(key, x, n)
 
 
 @eqx.filter_jit
-def _log_prob(flow, theta, x):
+def flow_log_prob(flow, theta, x):
     ctx = flow.context(x)
     return jax.vmap(lambda t: flow.log_prob_context(t, ctx))(theta)
 
@@ -76,14 +76,14 @@ class Posterior(eqx.Module):
 
     def sample(self, key: PRNGKeyArray, n: int, x=None) -> Float[Array, "n d"]:
         """``n`` draws from ``q(θ | x)`` (``x`` defaults to ``x_o``); always inside the prior box."""
-        return _sample(self.flow, key, self._x(x), int(n))
+        return sample_flow(self.flow, key, self._x(x), int(n))
 
     def log_prob(self, theta: Float[Array, "*batch d"], x=None) -> Float[Array, "*batch"]:
         """``log q(θ | x)``; ``-inf`` outside the prior box (with an `IdentityMap` not
         renormalised for the flow's mass outside the box; see `ConditionalFlow`)."""
         theta = jnp.asarray(theta)
         batch = theta.shape[:-1]
-        lp = _log_prob(self.flow, theta.reshape(-1, self.flow.dim), self._x(x))
+        lp = flow_log_prob(self.flow, theta.reshape(-1, self.flow.dim), self._x(x))
         return lp.reshape(batch)
 
     def map(

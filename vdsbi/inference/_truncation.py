@@ -22,7 +22,7 @@ import numpy as np
 from jaxtyping import Array, PRNGKeyArray
 
 from ._flow import ConditionalFlow
-from ._posterior import _log_prob, _sample
+from ._posterior import flow_log_prob, sample_flow
 from ._prior import BoxPrior
 
 _BATCHES = 200  # rejection batches per attempt, max(n, 10 000) candidates each
@@ -144,13 +144,13 @@ def truncated_prior(
     only a wider one, so the fit stays unbiased; posterior draws would not.
     """
     k_ref, k_draw, k_fill = jax.random.split(key, 3)
-    ref = np.asarray(_sample(flow, k_ref, x_o, num_samples))
-    lp = np.asarray(_log_prob(flow, jnp.asarray(ref), x_o))
+    ref = np.asarray(sample_flow(flow, k_ref, x_o, num_samples))
+    lp = np.asarray(flow_log_prob(flow, jnp.asarray(ref), x_o))
     top = float(np.max(lp))
     threshold = top - (top - float(np.quantile(lp, epsilon)))  # the level, as a depth below the top
 
     def keep(theta):  # the flow's density is -inf outside the box
-        return np.asarray(_log_prob(flow, jnp.asarray(theta, jnp.float32), x_o)) >= threshold
+        return np.asarray(flow_log_prob(flow, jnp.asarray(theta, jnp.float32), x_o)) >= threshold
 
     ell = _Ellipsoid.around(ref[lp >= threshold], _SCALE)
     box_log_volume = float(jnp.sum(jnp.log(prior.high - prior.low)))

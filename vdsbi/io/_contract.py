@@ -73,7 +73,7 @@ def _missing_column_error(
         hint = f" (found '{close[0]}': misspelled?)"
     elif len(found) == 1 and any(sep in found[0] for sep in ";\t|"):
         hint = " (the header has a single column: expected comma-separated values)"
-    elif found and all(_is_number(c) for c in found):
+    elif found and all(is_number(c) for c in found):
         hint = " (the first row holds numbers: is the header row missing?)"
     shown = ", ".join(found[:12]) + (", ..." if len(found) > 12 else "")
     return InputError(source, name, f"{what}{hint}; found columns: {shown}")
@@ -98,7 +98,7 @@ def _near(names: tuple[str, ...], found: list[str], cutoff: float) -> str:
     return ", ".join(pairs)
 
 
-def _is_number(s: str) -> bool:
+def is_number(s: str) -> bool:
     try:
         float(s)
     except ValueError:
@@ -141,7 +141,7 @@ def build_recording(
 
 def _check_header(columns: Mapping[str, np.ndarray], found: list[str], source: str) -> list[str]:
     """Check the header row, duplicates, the required columns and the torque pair; the torques given."""
-    if found and all(_is_number(c) for c in found):
+    if found and all(is_number(c) for c in found):
         raise InputError(source, "header", "the first row holds numbers; expected a header row t,steer,...")
     dup = sorted({c for c in found if found.count(c) > 1})
     if dup:

@@ -8,7 +8,7 @@ import os
 import numpy as np
 import pandas as pd
 
-from ._contract import _is_number, build_recording
+from ._contract import build_recording, is_number
 from ._errors import InputError
 from ._recording import Recording
 
@@ -29,7 +29,7 @@ def read_csv_columns(path: str | os.PathLike) -> dict[str, np.ndarray]:
         raise InputError(source, "header", "file is empty; expected a header row t,steer,...")
     header = next(csv.reader([first]))
     names = [h.strip() for h in header]
-    if all(_is_number(c) for c in names):
+    if all(is_number(c) for c in names):
         raise InputError(source, "header", "the first row holds numbers; expected a header row t,steer,...")
     dup = sorted({c for c in names if names.count(c) > 1 and c})
     if dup:
