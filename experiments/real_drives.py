@@ -61,7 +61,10 @@ TRAIN_FRACTION = 0.7
 STRESS = {"vw_gti_high_speed_2 @ 25 Hz, steer 0.2 s early": ("vw_gti_high_speed_2", 25.0, 0.2)}
 
 
-def reference(name: str) -> dict:
+def reference(name: str, folder: Path | None = None) -> dict:
+    """The drive folder's reference.json (a simulated drive's truth), else `REFERENCE`."""
+    if folder is not None and (folder / "reference.json").is_file():
+        return json.loads((folder / "reference.json").read_text())
     return next(v for k, v in REFERENCE.items() if name.startswith(k))
 
 
@@ -140,7 +143,8 @@ def stressed(rec, rate: float, lag: float):
     )
 
 
-def run_one(name: str, args, out: Path) -> dict:
+def run_one(name: str, args, out: Path, true_delay: float | None = None) -> dict:
+    """One drive's row; with `true_delay` (a simulated drive's), also the least-squares fit at it."""
     import jax
 
     drive, rate, lag = STRESS.get(name, (name, None, 0.0))
@@ -168,7 +172,7 @@ def run_one(name: str, args, out: Path) -> dict:
     pred, ok = predict(test, est[:6], effects, eff)
     noise = np.array([s["noise_model"][c]["residual_rms"] for c in test.channels])
     band = predictive_band(jax.random.key(0), test, res.predictive, noise, effects)
-    ref = reference(name)
+    ref = reference(name, args.real / drive)
     lf = s["parameters"]["l_f"]
     row = {
         "drive": name,
@@ -191,11 +195,14 @@ def run_one(name: str, args, out: Path) -> dict:
         },
         "combinations": s["combinations"],
         "not_identified": s["not_identified"],
+        "model_error": [n for n, p in s["parameters"].items() if "model_error" in p],
         "npe_check": s["npe_check"],
         "noise_model": s["noise_model"],
     }
     row["ls"] = baseline(res.problem, test, ref, [0.0])
     row["ls_delay"] = baseline(res.problem, test, ref, np.arange(0.0, 0.31, 0.02))
+    if true_delay is not None:
+        row["ls_true_delay"] = baseline(res.problem, test, ref, [true_delay])
     return row
 
 
