@@ -32,7 +32,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import linear_baseline  # noqa: E402
 import real_drives  # noqa: E402
 
-RESULTS = Path(__file__).parent / "results"
 #: name -> (rate Hz, steer lag s, car, C_αf, C_αr N/rad per axle, seed).
 CASES = {
     "linear car @ 50 Hz, 0.1 s lag": (
@@ -63,8 +62,10 @@ CASES = {
 NOISE = {"ay": 0.15, "yaw_rate": 0.004, "vx": 0.05, "steer": 0.0005}
 
 
-def write_drive(folder: Path, rate: float, lag: float, car, cf: float, cr: float, seed: int, duration: float):
-    """recording.csv, vehicle.json and reference.json (the truth) of one drive in `folder`."""
+def write_drive(
+    folder: Path, rate: float, lag: float, car, cf: float, cr: float, seed: int, duration: float
+) -> dict[str, float]:
+    """recording.csv, vehicle.json and reference.json (the truth) of one drive in `folder`; the truth."""
     import pandas as pd
 
     t = np.arange(0.0, duration, 1.0 / rate)
@@ -103,6 +104,7 @@ def write_drive(folder: Path, rate: float, lag: float, car, cf: float, cr: float
     }
     ref = {"l_f": car.a, "I_z": car.iz, "source": "the truth", "truth": truth}
     (folder / "reference.json").write_text(json.dumps(ref, indent=2) + "\n")
+    return truth
 
 
 def truth_check(row: dict, truth: dict) -> dict[str, str]:
@@ -174,15 +176,10 @@ def main(argv=None) -> int:
             real=Path(tmp), rounds=1 if args.quick else 2, sims=300 if args.quick else 1000
         )
         for k, (name, (rate, lag, car, cf, cr, seed)) in enumerate(cases.items()):
-            write_drive(Path(tmp) / name, rate, lag, car, cf, cr, seed, duration)
+            truth = write_drive(Path(tmp) / name, rate, lag, car, cf, cr, seed, duration)
             row = real_drives.run_one(name, settings, Path(tmp) / f"runs{k}", true_delay=lag)
-            truth = real_drives.reference(name, Path(tmp) / name)["truth"]
             rows.append(row | {"truth": truth, "truth_check": truth_check(row, truth)})
-    tag = "_quick" if args.quick else ""
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / f"other_simulator{tag}.json").write_text(json.dumps(rows, indent=2, default=float) + "\n")
-    (RESULTS / f"other_simulator{tag}.md").write_text(markdown(rows))
-    print(markdown(rows))
+    real_drives.write_rows("other_simulator" + ("_quick" if args.quick else ""), rows, markdown)
     return 0
 
 

@@ -275,6 +275,14 @@ def markdown(rows: list[dict]) -> str:
     return "\n".join(L) + "\n"
 
 
+def write_rows(stem: str, rows: list[dict], markdown) -> None:
+    """results/<stem>.json (the rows) and results/<stem>.md (`markdown(rows)`, also printed)."""
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / f"{stem}.json").write_text(json.dumps(rows, indent=2, default=float) + "\n")
+    (RESULTS / f"{stem}.md").write_text(markdown(rows))
+    print(markdown(rows))
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="one short drive, 300 simulations (a smoke test)")
@@ -291,10 +299,7 @@ def main(argv=None) -> int:
     )
     args = ap.parse_args(argv)
     if args.merge is not None:
-        rows = [r for f in args.merge for r in json.loads(f.read_text())]
-        (RESULTS / "real_drives.json").write_text(json.dumps(rows, indent=2, default=float) + "\n")
-        (RESULTS / "real_drives.md").write_text(markdown(rows))
-        print(markdown(rows))
+        write_rows("real_drives", [r for f in args.merge for r in json.loads(f.read_text())], markdown)
         return 0
     drives = args.drives or [
         *sorted(p.name for p in args.real.iterdir() if (p / "recording.csv").is_file()),
@@ -313,10 +318,7 @@ def main(argv=None) -> int:
     if args.rows is not None:
         args.rows.write_text(json.dumps(rows, indent=2, default=float) + "\n")
         return 0
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / f"real_drives{tag}.json").write_text(json.dumps(rows, indent=2, default=float) + "\n")
-    (RESULTS / f"real_drives{tag}.md").write_text(markdown(rows))
-    print(markdown(rows))
+    write_rows(f"real_drives{tag}", rows, markdown)
     return 0
 
 
