@@ -90,7 +90,7 @@ def _halves(rng, shift, prec):
 
 
 def test_halves_that_share_one_theta_rarely_widen_and_a_moved_half_is_caught():
-    from vdsbi.diagnostics._likelihood_widening import JOINT_LEVEL, consistent_covariance
+    from vdsbi.diagnostics._likelihood_widening import JOINT_LEVEL, consistent_covariance, tempered
 
     rng = np.random.default_rng(0)
     prec = np.full(3, 5.0)  # a prior strong enough that leaving its gradient out would show
@@ -106,7 +106,23 @@ def test_halves_that_share_one_theta_rarely_widen_and_a_moved_half_is_caught():
     cov, shifts, joint = consistent_covariance(*args, splits)
     assert joint is not None and joint["scale"] == joint["D2"] / 3 > 1.0
     assert list(shifts) == [0] and shifts[0]["z_shift"] == pytest.approx(abs(exact[0]), rel=1e-6)
-    assert np.all(np.diag(cov) > joint["scale"] * np.diag(args[0]) - 1e-12)
+    assert np.all(np.diag(cov) >= np.diag(tempered(args[0], prec, joint["scale"])) - 1e-12)
+
+
+def test_tempering_divides_the_data_information_and_leaves_the_prior():
+    from vdsbi.diagnostics._likelihood_widening import tempered
+
+    rng = np.random.default_rng(1)
+    x = rng.standard_normal((200, 3))
+    x[:, 2] = 0.0  # a parameter the data do not inform
+    prec, scale = np.array([0.5, 0.5, 0.3]), 7.0
+    cov = np.linalg.inv(x.T @ x + np.diag(prec))
+    widened = tempered(cov, prec, scale)
+    np.testing.assert_allclose(widened, np.linalg.inv(x.T @ x / scale + np.diag(prec)), rtol=1e-9, atol=1e-12)
+    assert widened[2, 2] == pytest.approx(1 / prec[2], rel=1e-9)  # the prior's, not scale times it
+    flat = np.full(3, 1e-9)
+    cov_flat = np.linalg.inv(x[:, :2].T @ x[:, :2] + np.diag(flat[:2]))
+    np.testing.assert_allclose(tempered(cov_flat, flat[:2], scale), scale * cov_flat, rtol=1e-6)
 
 
 def test_the_parameters_a_drive_informs_are_those_its_channels_depend_on(x64):

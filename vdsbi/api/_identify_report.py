@@ -39,9 +39,10 @@ def run_summary(full: Problem, samples, fit, state, run_info: dict, box: Box, ef
     bounds = {n: (float(a), float(b)) for n, a, b in zip(names, box.low, box.high)}
     params = summarise(samples, bounds, names, parameter_units(effects))
     # Identified by what the drive informs (before model error widens the interval: a parameter
-    # the data pin down stays identified, with an interval that says the model misses something).
+    # the data pin down stays identified, with an interval that says the model misses something,
+    # and is flagged as moved by model error when that interval exceeds the rule).
     informed = np.asarray(fit.sample(jax.random.key(2), len(samples), information_only=True), float)
-    informed_std = np.std(informed, axis=0)
+    informed_std, reported_std = np.std(informed, axis=0), np.std(np.asarray(samples, float), axis=0)
     for i, n in enumerate(names):
         prior_std = float(box.width[i]) / np.sqrt(12.0)
         ratio = float(informed_std[i]) / prior_std
@@ -51,11 +52,18 @@ def run_summary(full: Problem, samples, fit, state, run_info: dict, box: Box, ef
             params[n]["not_identified_because"] = "the channels do not depend on it in this mode"
         elif ratio > MAX_STD_RATIO:
             params[n]["not_identified_because"] = f"the drive leaves {ratio:.0%} of its prior std"
+        widened = float(reported_std[i]) / prior_std
         if n in fit.disagreement:
             d = fit.disagreement[n]
             params[n]["model_error"] = (
                 f"the data's halves ({d['split']}) disagree on it by {d['sigmas']:.1f} standard deviations: "
                 "the model lacks something that moves it; its interval is widened by the disagreement"
+            )
+        elif params[n]["identified"] and widened > MAX_STD_RATIO:
+            # Informed by the drive, yet its interval is mostly model error: not an estimate to use.
+            params[n]["model_error"] = (
+                f"the model error the fit measured widens its interval to {widened:.0%} of its prior std: "
+                "the model lacks something that moves it"
             )
     speed = full.speed if full.speed is not None else np.broadcast_to(full.v0[:, None], full.t.shape)
     rms_speed = float(np.sqrt(np.mean(np.asarray(speed)[:, :: full.factor][full.train] ** 2)))
@@ -74,7 +82,7 @@ def run_summary(full: Problem, samples, fit, state, run_info: dict, box: Box, ef
             else fit.inconsistency
             | {
                 "what": "two halves of the data cannot share one θ (D² of their difference beyond "
-                "χ²'s 95 % point): the model lacks something, and the covariance is scaled by D²/P"
+                "χ²'s 95 % point): the model lacks something, and the data's information is divided by D²/P"
             },
         },
         "noise_model": fit.noise.to_dict(),

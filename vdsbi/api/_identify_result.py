@@ -42,7 +42,8 @@ class IdentifyResult:
     def table(self) -> str:
         """Per parameter: the estimate (the best fit, what `export` writes), the posterior's std and
         5/50/95 % quantiles; a parameter the drive cannot inform is printed as "not identified"
-        with its prior range; then the combinations the drive determines and the warnings."""
+        with its prior range, one the model error moves is marked; then the combinations the drive
+        determines and the warnings."""
         width = max(10, *(len(n) for n in self.summary["parameters"]))
         rows = [f"{'param':<{width}} {'estimate':>11} {'std':>10} {'q05':>11} {'q50':>11} {'q95':>11}"]
         for name, p in self.summary["parameters"].items():
@@ -53,6 +54,7 @@ class IdentifyResult:
             rows.append(
                 f"{name:<{width}} {p['estimate']:>11.4g} {p['std']:>10.3g} "
                 f"{p['q05']:>11.4g} {p['q50']:>11.4g} {p['q95']:>11.4g}"
+                + ("  (moved by model error)" if "model_error" in p else "")
             )
         for key, c in self.summary.get("combinations", {}).items():
             if key == "determined_directions":

@@ -111,7 +111,7 @@ class LikelihoodPosterior(eqx.Module):
             (`data_splits`) disagree beyond their uncertainty: the model lacks something that moves
             them, and their variance was widened by the disagreement (`consistent_covariance`).
         inconsistency: {"split", "D2", "scale"} when two halves of the data cannot share one θ
-            (`consistent_covariance`): the covariance was scaled by "scale"; None when they can.
+            (`consistent_covariance`): the data's information was divided by "scale"; None when they can.
     """
 
     box: Box

@@ -87,8 +87,8 @@ def consistent_covariance(cov: np.ndarray, jac: np.ndarray, r: np.ndarray, z: np
     Each half's estimate is one Newton step from the joint fit ẑ, each half with half the prior:
     z_A = ẑ − H_A⁻¹(g_A + ½·prec·ẑ), H_A = J_AᵀJ_A + ½·prec, Σ_A = H_A⁻¹. With d = z_A − z_B:
     - jointly: when D² = dᵀ(Σ_A + Σ_B)⁻¹d exceeds χ²_P's `JOINT_LEVEL` point the halves cannot
-      share one θ; the covariance is scaled by D²/P (Birge's ratio, the Particle Data Group's
-      scale factor for inconsistent measurements);
+      share one θ; the data's information is divided by D²/P (Birge's ratio, the Particle Data
+      Group's scale factor for inconsistent measurements; `tempered`);
     - per parameter: one whose halves differ by |d_i| > `DISAGREE_Z`·sd(d_i) gets d_i² added to
       its variance (a systematic error of the size the halves reveal) and is reported as moved
       by model error.
@@ -127,6 +127,18 @@ def consistent_covariance(cov: np.ndarray, jac: np.ndarray, r: np.ndarray, z: np
                 sigmas = abs(float(d[i] / sd[i]))
                 shifts[int(i)] = {"split": name, "z_shift": abs(float(d[i])), "sigmas": sigmas}
     if joint is not None:
-        cov = cov * joint["scale"]
+        cov = tempered(cov, prec, joint["scale"])
     factor = np.sqrt((np.diag(cov) + extra) / np.diag(cov))
     return cov * np.outer(factor, factor), shifts, joint
+
+
+def tempered(cov: np.ndarray, prec, scale: float) -> np.ndarray:
+    """The covariance with the data's information divided by `scale` and the prior's kept:
+    (I/scale + diag(prec))⁻¹ with I = cov⁻¹ − diag(prec). Where the data dominate this is
+    cov·scale; where the prior does, the variance stays the prior's (scaling the whole covariance
+    would spread a parameter the drive does not inform beyond its prior box)."""
+    prec = np.asarray(prec, float)
+    info = np.linalg.inv(cov) - np.diag(prec)
+    w, v = np.linalg.eigh(0.5 * (info + info.T))
+    info = (v * np.clip(w, 0.0, None)) @ v.T  # a widened covariance can leave less than the prior
+    return np.linalg.inv(info / scale + np.diag(prec))
