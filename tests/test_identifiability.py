@@ -81,3 +81,23 @@ def test_determined_directions_are_in_log_space_of_positive_parameters_only():
     post = np.stack([rng.normal(8e4, 2e3, 4000), rng.normal(0.3, 0.004, 4000)], 1)
     (d,) = determined_directions(post, prior, names, names)
     assert set(d["weights"]) == {"C_alpha_f"} and 0 < d["ratio"] < 0.1
+
+
+def test_a_parameter_is_identified_by_information_and_flagged_when_model_error_widens_it():
+    from types import SimpleNamespace
+
+    from vdsbi.api._identify_report import _flag
+    from vdsbi.problem import Box
+
+    box = Box.from_dict({"a": (0.0, 1.0), "b": (0.0, 1.0), "c": (0.0, 1.0), "d": (0.0, 1.0)})
+    prior_std = 1.0 / np.sqrt(12.0)
+    fit = SimpleNamespace(theta=np.full(4, 0.5), free=("a", "b", "c"), disagreement={})
+    params = {n: {} for n in box.names}
+    # a: informed, narrow; b: informed, widened past the rule by model error; c: uninformed; d: not fitted
+    informed = np.array([0.1, 0.1, 0.6, 1.0]) * prior_std
+    reported = np.array([0.2, 0.7, 0.9, 1.0]) * prior_std
+    _flag(params, fit, box, informed, reported)
+    assert [params[n]["identified"] for n in "abcd"] == [True, True, False, False]
+    assert [("model_error" in params[n]) for n in "abcd"] == [False, True, False, False]
+    assert "60%" in params["c"]["not_identified_because"]
+    assert "do not depend" in params["d"]["not_identified_because"]

@@ -33,38 +33,13 @@ def run_summary(full: Problem, samples, fit, state, run_info: dict, box: Box, ef
     estimate (its best fit), the noise model, what the drive cannot inform and what it does."""
     import jax
 
-    from ..diagnostics import MAX_STD_RATIO, determined_directions, vehicle_combinations
+    from ..diagnostics import determined_directions, vehicle_combinations
 
     names = box.names
     bounds = {n: (float(a), float(b)) for n, a, b in zip(names, box.low, box.high)}
     params = summarise(samples, bounds, names, parameter_units(effects))
-    # Identified by what the drive informs (before model error widens the interval: a parameter
-    # the data pin down stays identified, with an interval that says the model misses something,
-    # and is flagged as moved by model error when that interval exceeds the rule).
     informed = np.asarray(fit.sample(jax.random.key(2), len(samples), information_only=True), float)
-    informed_std, reported_std = np.std(informed, axis=0), np.std(np.asarray(samples, float), axis=0)
-    for i, n in enumerate(names):
-        prior_std = float(box.width[i]) / np.sqrt(12.0)
-        ratio = float(informed_std[i]) / prior_std
-        params[n]["estimate"] = float(fit.theta[i])
-        params[n]["identified"] = bool(n in fit.free and ratio <= MAX_STD_RATIO)
-        if n not in fit.free:
-            params[n]["not_identified_because"] = "the channels do not depend on it in this mode"
-        elif ratio > MAX_STD_RATIO:
-            params[n]["not_identified_because"] = f"the drive leaves {ratio:.0%} of its prior std"
-        widened = float(reported_std[i]) / prior_std
-        if n in fit.disagreement:
-            d = fit.disagreement[n]
-            params[n]["model_error"] = (
-                f"the data's halves ({d['split']}) disagree on it by {d['sigmas']:.1f} standard deviations: "
-                "the model lacks something that moves it; its interval is widened by the disagreement"
-            )
-        elif params[n]["identified"] and widened > MAX_STD_RATIO:
-            # Informed by the drive, yet its interval is mostly model error: not an estimate to use.
-            params[n]["model_error"] = (
-                f"the model error the fit measured widens its interval to {widened:.0%} of its prior std: "
-                "the model lacks something that moves it"
-            )
+    _flag(params, fit, box, np.std(informed, axis=0), np.std(np.asarray(samples, float), axis=0))
     speed = full.speed if full.speed is not None else np.broadcast_to(full.v0[:, None], full.t.shape)
     rms_speed = float(np.sqrt(np.mean(np.asarray(speed)[:, :: full.factor][full.train] ** 2)))
     prior = np.random.default_rng(0).uniform(box.low, box.high, (4000, box.dim))
@@ -96,6 +71,38 @@ def run_summary(full: Problem, samples, fit, state, run_info: dict, box: Box, ef
         "settings": run_info["settings"],
         "rounds": [{k: v for k, v in h.items() if isinstance(v, (int, float, str))} for h in state.history],
     }
+
+
+def _flag(params: dict, fit, box: Box, informed_std, reported_std) -> None:
+    """Each parameter's estimate, `identified` and why not, and `model_error` where it applies.
+
+    Identified by what the drive informs (the information-only spread, before model error widens
+    the interval): a parameter the data pin down stays identified, with an interval that says the
+    model misses something, and is flagged as moved by model error when halves of the data
+    disagree on it or that widened interval exceeds the rule."""
+    from ..diagnostics import MAX_STD_RATIO
+
+    for i, n in enumerate(box.names):
+        prior_std = float(box.width[i]) / np.sqrt(12.0)
+        ratio, widened = float(informed_std[i]) / prior_std, float(reported_std[i]) / prior_std
+        p = params[n]
+        p["estimate"] = float(fit.theta[i])
+        p["identified"] = bool(n in fit.free and ratio <= MAX_STD_RATIO)
+        if n not in fit.free:
+            p["not_identified_because"] = "the channels do not depend on it in this mode"
+        elif ratio > MAX_STD_RATIO:
+            p["not_identified_because"] = f"the drive leaves {ratio:.0%} of its prior std"
+        if n in fit.disagreement:
+            d = fit.disagreement[n]
+            p["model_error"] = (
+                f"the data's halves ({d['split']}) disagree on it by {d['sigmas']:.1f} standard deviations: "
+                "the model lacks something that moves it; its interval is widened by the disagreement"
+            )
+        elif p["identified"] and widened > MAX_STD_RATIO:
+            p["model_error"] = (
+                f"the model error the fit measured widens its interval to {widened:.0%} of its prior std: "
+                "the model lacks something that moves it"
+            )
 
 
 def npe_check(npe_samples: np.ndarray, checked) -> dict[str, Any]:
