@@ -11,7 +11,7 @@ held-out NRMSE of yaw rate and a_y on the rest against the least-squares fit of 
 (here the true model class, with the true l_f and I_z: without a delay, with the steer delay its
 training cost picks, and at the true lag), the 90 % band's coverage, and each truth (l_f, C_αf,
 C_αr, the lag, the yaw-inertia index) against its 95 % interval (held, or flagged as not
-identified).
+identified or as moved by model error).
 
 Writes experiments/results/other_simulator{_quick}.json and .md.
 """

@@ -92,11 +92,11 @@ def test_a_parameter_is_identified_by_information_and_flagged_when_model_error_w
     box = Box.from_dict({"a": (0.0, 1.0), "b": (0.0, 1.0), "c": (0.0, 1.0), "d": (0.0, 1.0)})
     prior_std = 1.0 / np.sqrt(12.0)
     fit = SimpleNamespace(theta=np.full(4, 0.5), free=("a", "b", "c"), disagreement={})
-    params = {n: {} for n in box.names}
     # a: informed, narrow; b: informed, widened past the rule by model error; c: uninformed; d: not fitted
     informed = np.array([0.1, 0.1, 0.6, 1.0]) * prior_std
     reported = np.array([0.2, 0.7, 0.9, 1.0]) * prior_std
-    _flag(params, fit, box, informed, reported)
+    params = {n: {"std": float(s)} for n, s in zip(box.names, reported)}
+    _flag(params, fit, box, informed)
     assert [params[n]["identified"] for n in "abcd"] == [True, True, False, False]
     assert [("model_error" in params[n]) for n in "abcd"] == [False, True, False, False]
     assert "60%" in params["c"]["not_identified_because"]

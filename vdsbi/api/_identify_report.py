@@ -39,7 +39,7 @@ def run_summary(full: Problem, samples, fit, state, run_info: dict, box: Box, ef
     bounds = {n: (float(a), float(b)) for n, a, b in zip(names, box.low, box.high)}
     params = summarise(samples, bounds, names, parameter_units(effects))
     informed = np.asarray(fit.sample(jax.random.key(2), len(samples), information_only=True), float)
-    _flag(params, fit, box, np.std(informed, axis=0), np.std(np.asarray(samples, float), axis=0))
+    _flag(params, fit, box, np.std(informed, axis=0))
     speed = full.speed if full.speed is not None else np.broadcast_to(full.v0[:, None], full.t.shape)
     rms_speed = float(np.sqrt(np.mean(np.asarray(speed)[:, :: full.factor][full.train] ** 2)))
     prior = np.random.default_rng(0).uniform(box.low, box.high, (4000, box.dim))
@@ -73,8 +73,9 @@ def run_summary(full: Problem, samples, fit, state, run_info: dict, box: Box, ef
     }
 
 
-def _flag(params: dict, fit, box: Box, informed_std, reported_std) -> None:
-    """Each parameter's estimate, `identified` and why not, and `model_error` where it applies.
+def _flag(params: dict, fit, box: Box, informed_std) -> None:
+    """Each parameter's estimate, `identified` and why not, and `model_error` where it applies, in
+    `params` (`summarise`'s, whose std is the reported posterior's).
 
     Identified by what the drive informs (the information-only spread, before model error widens
     the interval): a parameter the data pin down stays identified, with an interval that says the
@@ -84,8 +85,8 @@ def _flag(params: dict, fit, box: Box, informed_std, reported_std) -> None:
 
     for i, n in enumerate(box.names):
         prior_std = float(box.width[i]) / np.sqrt(12.0)
-        ratio, widened = float(informed_std[i]) / prior_std, float(reported_std[i]) / prior_std
         p = params[n]
+        ratio, widened = float(informed_std[i]) / prior_std, p["std"] / prior_std
         p["estimate"] = float(fit.theta[i])
         p["identified"] = bool(n in fit.free and ratio <= MAX_STD_RATIO)
         if n not in fit.free:
