@@ -6,7 +6,7 @@ import pytest
 
 from vdsbi.diagnostics import fit_likelihood
 from vdsbi.io import build_recording
-from vdsbi.problem import Box, ProblemSettings, make_problem, prior_box
+from vdsbi.problem import Box, ProblemSettings, channel_scores, make_problem, prior_box, simulate_draws, windowed_model
 from vdsbi.simulator import (
     CHANNELS,
     PARAM_NAMES,
@@ -55,6 +55,71 @@ def test_the_fit_recovers_the_stiffnesses_from_a_poor_start_and_its_interval_hol
     z = np.abs(post.theta - THETA) / draws.std(0)
     assert np.all(z[4:] < 3.0), z  # the truth within three posterior standard deviations
     assert post.mahalanobis2(post.theta)[0] < 1e-6
+
+
+def test_a_wrong_start_speed_is_corrected_per_window_and_leaves_the_estimate_where_it_was(x64):
+    # Torque-driven windows start from the measured speed; here it reads 0.5 m/s high (a 3 %
+    # wheel-radius error). Without a correction the simulated speed keeps that offset and the fit
+    # bends l_f and the stiffnesses by ~3 σ; with it the estimate stays within ½ σ of the right-speed one.
+    import dataclasses
+
+    veh = default_vehicle()
+    settings = ProblemSettings(longitudinal="torque", max_window=6.0, channels=("ay", "yaw_rate"))
+    box = Box.from_dict(prior_box(veh), PARAM_NAMES)
+    free = ("C_alpha_f", "C_alpha_r")  # the neighbouring tests' fits: one compilation
+    prob = make_problem(_drive(), veh, settings)
+    right = fit_likelihood(prob, THETA, box, free=free, reweights=1, max_steps=20)
+    biased = dataclasses.replace(prob, v0=prob.v0 + 0.5)
+    high = fit_likelihood(biased, THETA, box, free=free, reweights=1, max_steps=20)
+    fitted = np.asarray(prob.train).any(1)
+    assert fitted.sum() >= 2 and np.all(right.v0_offset[~fitted] == 0.0)
+    np.testing.assert_allclose(high.v0_offset[fitted] - right.v0_offset[fitted], -0.5, atol=0.05)
+    sd = np.sqrt(np.diag(right.cov_z))
+    assert np.all(np.abs(high.z - right.z) < 0.5 * sd), (high.z - right.z) / sd
+    i = [PARAM_NAMES.index(n) for n in free]
+    np.testing.assert_allclose(np.sqrt(np.diag(high.cov_z))[i], sd[i], rtol=0.1)
+    # Simulated from the starts the fit inferred, each window is what the fit saw: at the noise.
+    def chi2(p):
+        pred = np.asarray(simulate_draws(None, windowed_model(p), high.theta[None])[0][0])
+        return [v["chi2_dof"] for v in channel_scores(p, pred, p.train).values()]
+
+    assert max(chi2(high.with_fitted_starts(biased))) < 1.3 < min(chi2(biased)) / 3
+    # Following the measured speed there is nothing to correct.
+    speed = make_problem(_drive(), veh, ProblemSettings(longitudinal="speed", max_window=6.0))
+    assert not np.any(fit_likelihood(speed, THETA, box, free=free, max_steps=20).v0_offset)
+
+
+def test_the_start_speed_columns_of_the_jacobian_come_from_one_tangent(x64):
+    import jax
+    import jax.numpy as jnp
+
+    from vdsbi.diagnostics._likelihood import _residual_and_jacobian
+
+    x = jnp.asarray(np.random.default_rng(0).standard_normal((5, 2)))
+    # Window w's five residuals depend on the two shared coordinates and on its own correction.
+    fn = lambda p: (jnp.sin(x @ p[:2])[None, :] * (1.0 + p[2:, None]) ** 2 + p[2:, None] ** 3).ravel()
+    p = jnp.asarray([0.3, -0.2, 0.1, 0.4, -0.5])
+    r, jac = _residual_and_jacobian(fn, 2, p)
+    np.testing.assert_allclose(r, fn(p), rtol=1e-12)
+    np.testing.assert_allclose(jac, jax.jacfwd(fn)(p), rtol=1e-12, atol=1e-14)
+
+
+def test_marginalising_the_start_speeds_leaves_the_theta_block_of_the_joint_covariance():
+    from vdsbi.diagnostics._likelihood import V0_STD, _profiled
+
+    rng = np.random.default_rng(2)
+    W, K, C, P = 3, 7, 2, 4
+    jac, jac_v = rng.standard_normal((W, K, C, P)), rng.standard_normal((W, K, C))
+    jac_v[2] = 0.0  # a window with no fitted sample
+    prec = np.full(P, 0.3)
+    joint = np.zeros((W * K * C, P + W))
+    joint[:, :P] = jac.reshape(-1, P)
+    for w in range(W):
+        joint[w * K * C : (w + 1) * K * C, P + w] = jac_v[w].ravel()
+    cov = np.linalg.inv(joint.T @ joint + np.diag(np.concatenate([prec, np.full(W, V0_STD**-2)])))
+    flat = _profiled(jac, jac_v).reshape(-1, P)
+    np.testing.assert_allclose(np.linalg.inv(flat.T @ flat + np.diag(prec)), cov[:P, :P], rtol=1e-10)
+    np.testing.assert_array_equal(_profiled(jac, jac_v)[2], jac[2])
 
 
 def test_a_model_error_widens_the_interval_by_its_own_scale_and_correlation(x64):

@@ -142,6 +142,7 @@ def identify(
             fit = fit_likelihood(
                 full, np.concatenate([checked.theta[None], starts]), box, effects=effects, noise=checked.noise
             )
+        prob, full = checked.with_fitted_starts(prob), fit.with_fitted_starts(full)
         samples = np.asarray(fit.sample(k_post, settings.num_samples), float)
         summary = run_summary(full, samples, fit, state, run_info, box, effects, veh)
         summary["vehicle"] = veh.to_dict()  # the constants `vdsbi export` needs beside θ

@@ -52,6 +52,12 @@ def run_summary(full: Problem, samples, fit, state, run_info: dict, box: Box, ef
             "method": "best fit of all the usable driving through the simulator (maximum a posteriori "
             "under the noise model below); the reported posterior is the Laplace approximation there",
             "converged": fit.converged,
+            "start_speed_corrections": None
+            if fit.v0_offset is None or not np.any(fit.v0_offset)
+            else {
+                "m_s": [float(v) for v in fit.v0_offset],
+                "what": "each torque-driven window's start speed as fitted, minus the measured one",
+            },
             "halves_disagree": None
             if fit.inconsistency is None
             else fit.inconsistency

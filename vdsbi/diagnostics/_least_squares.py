@@ -87,6 +87,7 @@ def levenberg_marquardt(
     damping: float = 1e-3,
     max_step: float = np.inf,
     max_tries: int = 8,
+    jacobian: Callable[[Float[Array, " P"]], tuple[Float[Array, " N"], Float[Array, "N P"]]] | None = None,
 ) -> LeastSquaresResult:
     """Minimise ½|fn(z)|² + ½Σ prior_precision·(z − prior_mean)² (see the module docstring).
 
@@ -101,15 +102,18 @@ def levenberg_marquardt(
         damping: initial λ.
         max_step: bound on each coordinate of a step.
         max_tries: damping increases tried per iteration before giving up.
+        jacobian: z -> (fn(z), ∂fn/∂z), for a residual whose Jacobian has a structure cheaper to
+            evaluate than P forward tangents (default: `jax.jacfwd` of `fn`).
     """
     z0 = jnp.asarray(z0)
     dtype = z0.dtype
     prec = jnp.zeros_like(z0) if prior_precision is None else jnp.asarray(prior_precision, dtype)
     mean = jnp.zeros_like(z0) if prior_mean is None else jnp.asarray(prior_mean, dtype)
-    r0, jac0 = _residual_and_jacobian(fn, z0)
+    both = (lambda z: _residual_and_jacobian(fn, z)) if jacobian is None else jacobian
+    r0, jac0 = both(z0)
     c0 = _cost(r0, z0, prec, mean)
     init = _State(z0, r0, jac0, c0, jnp.asarray(damping, dtype), jnp.asarray(0), jnp.asarray(False))
-    iteration = lambda s: _iteration(fn, s, prec, mean, rtol, max_step, max_tries)
+    iteration = lambda s: _iteration(fn, both, s, prec, mean, rtol, max_step, max_tries)
     s = jax.lax.while_loop(lambda s: ~s.done & (s.steps < max_steps), iteration, init)
     return LeastSquaresResult(
         z=s.z, residual=s.r, jacobian=s.jac, cost=s.cost, num_steps=s.steps, converged=s.done
@@ -122,7 +126,7 @@ def _cost(r, z, prec, mean):
     return jnp.where(jnp.all(jnp.isfinite(r)), c, jnp.inf)
 
 
-def _iteration(fn, s: _State, prec, mean, rtol, max_step: float, max_tries: int) -> _State:
+def _iteration(fn, both, s: _State, prec, mean, rtol, max_step: float, max_tries: int) -> _State:
     """One iteration: linearise at `s.z`, look for a damped step that lowers C, and keep it
     (with a new Jacobian, λ shrunk) or stop."""
     g = s.jac.T @ s.r + prec * (s.z - mean)
@@ -130,7 +134,7 @@ def _iteration(fn, s: _State, prec, mean, rtol, max_step: float, max_tries: int)
     lam, z_new, c_new, better = _damped_step(fn, s, g, h, prec, mean, max_step, max_tries)
     rel = (s.cost - c_new) / jnp.maximum(s.cost, 1e-12)
     # The Jacobian is needed only where a step was kept.
-    r, jac = jax.lax.cond(better, lambda: _residual_and_jacobian(fn, z_new), lambda: (s.r, s.jac))
+    r, jac = jax.lax.cond(better, lambda: both(z_new), lambda: (s.r, s.jac))
     done = ~better | (rel < rtol)
     return _State(
         z=jnp.where(better, z_new, s.z),

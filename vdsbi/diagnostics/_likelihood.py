@@ -14,12 +14,19 @@ fit minimises Σ_c Σ_k r_ck²/(s_c²·τ_c) + the prior term, by iterated rewei
 s and τ, refit), with `levenberg_marquardt`; the Laplace covariance (JᵀJ + prior precision)⁻¹ is
 taken with the final weights. On a simulated drive with the right model s_c → σ_c and τ_c → the
 filter's own correlation; on a real one the intervals widen by the model error, which is what
-makes them hold. This is a quasi-likelihood (Heagerty & Lumley 2000 for the block view of
+makes them hold.
+
+Start speeds: a torque-driven window starts from the measured speed, which carries the speed
+sensor's error (a wheel radius's, or `vdsbi.io.estimate_speed`'s from a_y ≈ v·r), and its
+simulation keeps that offset for the whole window, bending the fit. Each such window gets a
+start-speed correction with a N(0, `V0_STD`²) prior, fitted with θ and marginalised out of the
+covariance (the Schur complement, `_profiled`). This is a quasi-likelihood (Heagerty & Lumley 2000 for the block view of
 dependent residuals; Ribatet et al. 2012 for curvature-adjusted composite likelihoods).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 
 import equinox as eqx
@@ -37,7 +44,7 @@ from ..problem import (
     split_parameters,
     windowed_model,
 )
-from ..simulator import Solver
+from ..simulator import Solver, TorqueDriven
 from ._least_squares import laplace_covariance, levenberg_marquardt
 from ._likelihood_widening import BLOCK_TAUS, consistent_covariance, data_splits, robust_covariance
 
@@ -51,6 +58,8 @@ MAX_Z_STEP = 2.0
 #: problem's filter band, so the filter removes more of it than the estimate assumes; the floor
 #: keeps a fit of few effective samples from claiming less noise than it could have fitted away.
 SENSOR_SHARE = 0.25
+#: Prior std of a torque-driven window's start-speed correction, m/s.
+V0_STD = 1.0
 
 
 class NoiseModel(eqx.Module):
@@ -112,6 +121,8 @@ class LikelihoodPosterior(eqx.Module):
             them, and their variance was widened by the disagreement (`consistent_covariance`).
         inconsistency: {"split", "D2", "scale"} when two halves of the data cannot share one θ
             (`consistent_covariance`): the data's information was divided by "scale"; None when they can.
+        v0_offset: (W,) start-speed corrections fitted per window, m/s (zeros where the problem
+            follows the measured speed, or a window holds no fitted sample).
     """
 
     box: Box
@@ -124,6 +135,7 @@ class LikelihoodPosterior(eqx.Module):
     steps: tuple[int, ...]
     disagreement: dict = eqx.field(default_factory=dict)
     inconsistency: dict | None = None
+    v0_offset: np.ndarray | None = None
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -150,6 +162,16 @@ class LikelihoodPosterior(eqx.Module):
         parameter intervals honest, and a band that also drew from it would count that error
         twice."""
         return self.sample(key, n, information_only=True)
+
+    def with_fitted_starts(self, problem: Problem) -> Problem:
+        """`problem` (the fitted one, or the same windows with another held-out part) with each
+        window's start speed corrected as the fit found: the held-out part of a fitted window is
+        then predicted from the start its fitted part inferred."""
+        if self.v0_offset is None or not np.any(self.v0_offset):
+            return problem
+        if len(self.v0_offset) != len(problem.v0):
+            raise ValueError(f"{len(self.v0_offset)} fitted start speeds, {len(problem.v0)} windows")
+        return dataclasses.replace(problem, v0=np.asarray(problem.v0) + self.v0_offset)
 
     def mahalanobis2(self, theta) -> np.ndarray:
         """Squared Mahalanobis distance of θ (…, P) from the fit, in z (the posterior's
@@ -224,7 +246,8 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
     free = tuple(n for n in names if n in free)
     idx = np.asarray([names.index(n) for n in free], dtype=int)
     fit = _fitter(wm, data, mask, box64, effects, jnp.asarray(z0), jnp.asarray(idx), max_steps)
-    z, steps, converged = jnp.asarray(z0[idx]), [], False
+    n_v = len(data.v0) if issubclass(data.model_class, TorqueDriven) else 0
+    z, steps, converged = jnp.asarray(np.concatenate([z0[idx], np.zeros(n_v)])), [], False
     for _ in range(reweights + 1):
         std = scale * np.sqrt(tau)
         res = fit(z, jnp.asarray(std))
@@ -234,15 +257,19 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
         scale = np.maximum(np.sqrt(np.sum(resid**2, axis=(0, 1)) / mask.sum()), SENSOR_SHARE * sensor)
         tau = integrated_autocorrelation_time(resid, mask)
     # The Laplace covariance with the final noise model: reweight the last Jacobian's rows.
-    jac = np.asarray(res.jacobian).reshape(*mask.shape, len(scale), len(idx)) * (std / scale)[:, None]
-    prec = np.full(len(idx), PRIOR_Z_STD**-2)
-    flat = (jac / np.sqrt(tau)[:, None]).reshape(-1, len(idx))
-    cov_free = np.asarray(laplace_covariance(jnp.asarray(flat), prec))
+    k = len(idx)
+    full = np.asarray(res.jacobian).reshape(*mask.shape, len(scale), k + n_v) * (std / scale)[:, None]
+    jac, jac_v = full[..., :k], _own_columns(full[..., k:])
+    root_tau = np.sqrt(tau)
+    jac_tau = _profiled(jac / root_tau[:, None], jac_v / root_tau)
+    jac = _profiled(jac, jac_v)
+    prec = np.full(k, PRIOR_Z_STD**-2)
+    cov_free = np.asarray(laplace_covariance(jnp.asarray(jac_tau.reshape(-1, k)), prec))
     informed = robust_covariance(cov_free, jac, resid / scale, mask, prec, BLOCK_TAUS * float(tau.max()))
     splits = data_splits(data, mask)
-    root_tau = np.sqrt(tau)
+    z, v0_offset = np.asarray(z[:k]), np.asarray(z[k:]) if n_v else np.zeros(len(data.v0))
     cov_free, shifts, joint = consistent_covariance(
-        informed, jac / root_tau[:, None], resid / scale / root_tau, np.asarray(z), prec, splits
+        informed, jac_tau, resid / scale / root_tau, z, prec, splits
     )
     cov, cov_info = (np.diag(np.full(len(names), PRIOR_Z_STD**2)) for _ in range(2))
     cov[np.ix_(idx, idx)] = cov_free
@@ -252,7 +279,32 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
     noise = NoiseModel(data.channels, scale, tau, sensor, mask.sum() * np.ones_like(scale))
     disagree = {free[i]: v for i, v in shifts.items()}
     steps = tuple(steps)
-    return LikelihoodPosterior(box, z_all, cov, cov_info, free, noise, converged, steps, disagree, joint)
+    return LikelihoodPosterior(
+        box, z_all, cov, cov_info, free, noise, converged, steps, disagree, joint, v0_offset
+    )
+
+
+def _own_columns(jac_v: np.ndarray) -> np.ndarray:
+    """(W, K, C) each window's derivative by its own start-speed correction, from the
+    (W, K, C, W') Jacobian of all of them (none: zeros)."""
+    if jac_v.shape[-1] == 0:
+        return np.zeros(jac_v.shape[:-1])
+    return np.einsum("wkcw->wkc", jac_v)
+
+
+def _profiled(jac: np.ndarray, jac_v: np.ndarray) -> np.ndarray:
+    """(W, K, C, P) Jacobian of the θ coordinates with each window's start-speed correction
+    (derivative `jac_v`, (W, K, C), prior precision 1/`V0_STD`²) marginalised: window w's rows
+    become J_w − c_w·u_w(u_wᵀJ_w), u_w = j_w/|j_w|, c_w = 1 − √(p/(|j_w|² + p)), so that
+    J̃ᵀJ̃ = Σ_w J_wᵀJ_w − J_wᵀj_w j_wᵀJ_w/(|j_w|² + p): the Schur complement of the joint
+    information, i.e. the θ block of its inverse. Shape-preserving, so the widening rules read
+    it as they read any Jacobian."""
+    p = V0_STD**-2
+    n2 = np.sum(jac_v**2, axis=(1, 2))
+    u = jac_v / np.sqrt(np.maximum(n2, 1e-300))[:, None, None]
+    c = 1.0 - np.sqrt(p / (n2 + p))
+    along = np.einsum("wkc,wkcp->wp", u, jac)
+    return jac - c[:, None, None, None] * u[..., None] * along[:, None, None, :]
 
 
 #: Step, in logit coordinates, of the test for which parameters the channels depend on.
@@ -287,23 +339,47 @@ def _best_start(wm, data: Problem, mask, starts: np.ndarray, effects, scale: np.
     return starts[int(np.argmin(np.nan_to_num(cost, nan=np.inf)))]
 
 
-def _residual(wm, y, mask, box: Box, effects, z0, idx, z_free, std):
-    theta, effect_params = split_parameters(box.from_unbounded(z0.at[idx].set(z_free)), effects)
-    pred, _ = wm(theta, effect_params)
+def _residual(wm, y, mask, box: Box, effects, z0, idx, p, std):
+    """Whitened residual at p = [free logit coordinates, start-speed corrections (W or none)]."""
+    k = idx.shape[0]
+    theta, effect_params = split_parameters(box.from_unbounded(z0.at[idx].set(p[:k])), effects)
+    pred, _ = wm(theta, effect_params, v0=wm.v0 + p[k:] if p.shape[0] > k else None)
     return jnp.where(mask[..., None], (pred - y) / std, 0.0).ravel()
 
 
+def _residual_and_jacobian(fn, k: int, p):
+    """fn(p) and its Jacobian. Window w's residual depends on its own start-speed correction
+    only, so one tangent that moves them all, split by window, gives their W columns: k + 1
+    forward tangents instead of k + W."""
+    n_v = p.shape[0] - k
+
+    def at(q):
+        r = fn(jnp.concatenate([q[:k], p[k:] + q[k:]]))
+        return r, r
+
+    jac, r = jax.jacfwd(at, has_aux=True)(jnp.concatenate([p[:k], jnp.zeros(min(n_v, 1), p.dtype)]))
+    if n_v == 0:
+        return r, jac
+    per_window = jac[:, k].reshape(n_v, -1)
+    jac_v = (per_window[:, :, None] * jnp.eye(n_v, dtype=p.dtype)[:, None, :]).reshape(-1, n_v)
+    return r, jnp.concatenate([jac[:, :k], jac_v], axis=1)
+
+
 @eqx.filter_jit
-def _lm(wm, y, mask, box: Box, effects, z0, idx, z_free, std, max_steps):
-    """One Levenberg–Marquardt fit of the free coordinates for given per-channel stds; a module-level
-    jit, so every fit of the same shapes (the reweighting passes, the refit) compiles once."""
-    prec = jnp.full(idx.shape, PRIOR_Z_STD**-2)
+def _lm(wm, y, mask, box: Box, effects, z0, idx, p, std, max_steps):
+    """One Levenberg–Marquardt fit of the free coordinates and start-speed corrections for given
+    per-channel stds; a module-level jit, so every fit of the same shapes (the reweighting passes,
+    the refit) compiles once."""
+    k = idx.shape[0]
+    prec = jnp.concatenate([jnp.full(k, PRIOR_Z_STD**-2), jnp.full(p.shape[0] - k, V0_STD**-2)])
+    fn = lambda q: _residual(wm, y, mask, box, effects, z0, idx, q, std)
     return levenberg_marquardt(
-        lambda z: _residual(wm, y, mask, box, effects, z0, idx, z, std),
-        z_free,
-        prior_precision=prec,
+        fn,
+        p,
+        prior_precision=prec.astype(p.dtype),
         max_steps=max_steps,
         max_step=MAX_Z_STEP,
+        jacobian=lambda q: _residual_and_jacobian(fn, k, q),
     )
 
 
