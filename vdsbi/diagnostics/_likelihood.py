@@ -16,11 +16,13 @@ taken with the final weights. On a simulated drive with the right model s_c → 
 filter's own correlation; on a real one the intervals widen by the model error, which is what
 makes them hold.
 
-Start speeds: a torque-driven window starts from the measured speed, which carries the speed
-sensor's error (a wheel radius's, or `vdsbi.io.estimate_speed`'s from a_y ≈ v·r), and its
-simulation keeps that offset for the whole window, bending the fit. Each such window gets a
-start-speed correction with a N(0, `V0_STD`²) prior, fitted with θ and marginalised out of the
-covariance (the Schur complement, `_profiled`). This is a quasi-likelihood (Heagerty & Lumley 2000 for the block view of
+Window starts: each window starts from the measured yaw rate (smoothed) with the steady side
+speed for it, which mid-manoeuvre is not the car's, and a torque-driven one from the measured
+speed, which carries the speed sensor's error (a wheel radius's, or `vdsbi.io.estimate_speed`'s
+from a_y ≈ v·r) for the whole window. Such errors bend the fit or pass for model error. Each
+window's start gets corrections (`START_STD`: side speed and yaw rate; speed where torque-driven)
+with Gaussian priors, fitted with θ and marginalised out of the covariance (the Schur
+complement, `_profiled`). This is a quasi-likelihood (Heagerty & Lumley 2000 for the block view of
 dependent residuals; Ribatet et al. 2012 for curvature-adjusted composite likelihoods).
 """
 
@@ -58,8 +60,9 @@ MAX_Z_STEP = 2.0
 #: problem's filter band, so the filter removes more of it than the estimate assumes; the floor
 #: keeps a fit of few effective samples from claiming less noise than it could have fitted away.
 SENSOR_SHARE = 0.25
-#: Prior std of a torque-driven window's start-speed correction, m/s.
-V0_STD = 1.0
+#: Prior std of each window's start corrections: speed (torque-driven windows), m/s; side
+#: speed, m/s; yaw rate, rad/s.
+START_STD = {"v0": 1.0, "vy0": 0.5, "r0": 0.05}
 
 
 class NoiseModel(eqx.Module):
@@ -121,8 +124,9 @@ class LikelihoodPosterior(eqx.Module):
             them, and their variance was widened by the disagreement (`consistent_covariance`).
         inconsistency: {"split", "D2", "scale"} when two halves of the data cannot share one θ
             (`consistent_covariance`): the data's information was divided by "scale"; None when they can.
-        v0_offset: (W,) start-speed corrections fitted per window, m/s (zeros where the problem
-            follows the measured speed, or a window holds no fitted sample).
+        start_offset: (W, 3) start corrections fitted per window (`START_STD`'s: speed m/s,
+            side speed m/s, yaw rate rad/s; zero for a window without fitted samples, and the
+            speed's where the problem follows the measured speed).
     """
 
     box: Box
@@ -135,7 +139,7 @@ class LikelihoodPosterior(eqx.Module):
     steps: tuple[int, ...]
     disagreement: dict = eqx.field(default_factory=dict)
     inconsistency: dict | None = None
-    v0_offset: np.ndarray | None = None
+    start_offset: np.ndarray | None = None
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -167,11 +171,15 @@ class LikelihoodPosterior(eqx.Module):
         """`problem` (the fitted one, or the same windows with another held-out part) with each
         window's start speed corrected as the fit found: the held-out part of a fitted window is
         then predicted from the start its fitted part inferred."""
-        if self.v0_offset is None or not np.any(self.v0_offset):
+        off = self.start_offset
+        if off is None or not np.any(off):
             return problem
-        if len(self.v0_offset) != len(problem.v0):
-            raise ValueError(f"{len(self.v0_offset)} fitted start speeds, {len(problem.v0)} windows")
-        return dataclasses.replace(problem, v0=np.asarray(problem.v0) + self.v0_offset)
+        if len(off) != len(problem.v0):
+            raise ValueError(f"{len(off)} fitted window starts, {len(problem.v0)} windows")
+        vy0 = np.zeros(len(off)) if problem.vy0 is None else np.asarray(problem.vy0)
+        return dataclasses.replace(
+            problem, v0=np.asarray(problem.v0) + off[:, 0], vy0=vy0 + off[:, 1], r0=np.asarray(problem.r0) + off[:, 2]
+        )
 
     def mahalanobis2(self, theta) -> np.ndarray:
         """Squared Mahalanobis distance of θ (…, P) from the fit, in z (the posterior's
@@ -246,8 +254,9 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
     free = tuple(n for n in names if n in free)
     idx = np.asarray([names.index(n) for n in free], dtype=int)
     fit = _fitter(wm, data, mask, box64, effects, jnp.asarray(z0), jnp.asarray(idx), max_steps)
-    n_v = len(data.v0) if issubclass(data.model_class, TorqueDriven) else 0
-    z, steps, converged = jnp.asarray(np.concatenate([z0[idx], np.zeros(n_v)])), [], False
+    kinds = _start_kinds(data)
+    n_w, m = len(data.v0), len(kinds)
+    z, steps, converged = jnp.asarray(np.concatenate([z0[idx], np.zeros(n_w * m)])), [], False
     for _ in range(reweights + 1):
         std = scale * np.sqrt(tau)
         res = fit(z, jnp.asarray(std))
@@ -258,16 +267,18 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
         tau = integrated_autocorrelation_time(resid, mask)
     # The Laplace covariance with the final noise model: reweight the last Jacobian's rows.
     k = len(idx)
-    full = np.asarray(res.jacobian).reshape(*mask.shape, len(scale), k + n_v) * (std / scale)[:, None]
-    jac, jac_v = full[..., :k], _own_columns(full[..., k:])
+    full = np.asarray(res.jacobian).reshape(*mask.shape, len(scale), k + n_w * m) * (std / scale)[:, None]
+    jac, jac_s = full[..., :k], _own_columns(full[..., k:], m)
+    start_std = np.asarray([START_STD[n] for n in kinds])
     root_tau = np.sqrt(tau)
-    jac_tau = _profiled(jac / root_tau[:, None], jac_v / root_tau)
-    jac = _profiled(jac, jac_v)
+    jac_tau = _profiled(jac / root_tau[:, None], jac_s / root_tau[:, None], start_std)
+    jac = _profiled(jac, jac_s, start_std)
     prec = np.full(k, PRIOR_Z_STD**-2)
     cov_free = np.asarray(laplace_covariance(jnp.asarray(jac_tau.reshape(-1, k)), prec))
     informed = robust_covariance(cov_free, jac, resid / scale, mask, prec, BLOCK_TAUS * float(tau.max()))
     splits = data_splits(data, mask)
-    z, v0_offset = np.asarray(z[:k]), np.asarray(z[k:]) if n_v else np.zeros(len(data.v0))
+    z, offset = np.asarray(z[:k]), np.zeros((n_w, len(START_STD)))
+    offset[:, [list(START_STD).index(n) for n in kinds]] = np.asarray(res.z[k:]).reshape(n_w, m)
     cov_free, shifts, joint = consistent_covariance(
         informed, jac_tau, resid / scale / root_tau, z, prec, splits
     )
@@ -280,31 +291,38 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
     disagree = {free[i]: v for i, v in shifts.items()}
     steps = tuple(steps)
     return LikelihoodPosterior(
-        box, z_all, cov, cov_info, free, noise, converged, steps, disagree, joint, v0_offset
+        box, z_all, cov, cov_info, free, noise, converged, steps, disagree, joint, offset
     )
 
 
-def _own_columns(jac_v: np.ndarray) -> np.ndarray:
-    """(W, K, C) each window's derivative by its own start-speed correction, from the
-    (W, K, C, W') Jacobian of all of them (none: zeros)."""
-    if jac_v.shape[-1] == 0:
-        return np.zeros(jac_v.shape[:-1])
-    return np.einsum("wkcw->wkc", jac_v)
+def _start_kinds(problem: Problem) -> tuple[str, ...]:
+    """The start corrections a problem's windows get (`START_STD`'s names): the speed only where
+    it is simulated from the torques."""
+    lateral = ("vy0", "r0")
+    return ("v0", *lateral) if issubclass(problem.model_class, TorqueDriven) else lateral
 
 
-def _profiled(jac: np.ndarray, jac_v: np.ndarray) -> np.ndarray:
-    """(W, K, C, P) Jacobian of the θ coordinates with each window's start-speed correction
-    (derivative `jac_v`, (W, K, C), prior precision 1/`V0_STD`²) marginalised: window w's rows
-    become J_w − c_w·u_w(u_wᵀJ_w), u_w = j_w/|j_w|, c_w = 1 − √(p/(|j_w|² + p)), so that
-    J̃ᵀJ̃ = Σ_w J_wᵀJ_w − J_wᵀj_w j_wᵀJ_w/(|j_w|² + p): the Schur complement of the joint
-    information, i.e. the θ block of its inverse. Shape-preserving, so the widening rules read
-    it as they read any Jacobian."""
-    p = V0_STD**-2
-    n2 = np.sum(jac_v**2, axis=(1, 2))
-    u = jac_v / np.sqrt(np.maximum(n2, 1e-300))[:, None, None]
-    c = 1.0 - np.sqrt(p / (n2 + p))
-    along = np.einsum("wkc,wkcp->wp", u, jac)
-    return jac - c[:, None, None, None] * u[..., None] * along[:, None, None, :]
+def _own_columns(jac_s: np.ndarray, m: int) -> np.ndarray:
+    """(W, K, C, m) each window's derivatives by its own m start corrections, from the
+    (W, K, C, W·m) Jacobian of all of them."""
+    return np.einsum("wkcwm->wkcm", jac_s.reshape(*jac_s.shape[:-1], -1, m))
+
+
+def _profiled(jac: np.ndarray, jac_s: np.ndarray, prior_std: np.ndarray) -> np.ndarray:
+    """(W, K, C, P) Jacobian of the θ coordinates with each window's start corrections
+    (derivatives `jac_s`, (W, K, C, m), Gaussian priors of std `prior_std`) marginalised.
+
+    With A_w = j_w·diag(prior_std) = U S Vᵀ (thin SVD), window w's rows become
+    J_w − U·diag(1 − 1/√(1 + s²))·UᵀJ_w, so that J̃ᵀJ̃ = Σ_w J_wᵀ(I − A_w(A_wᵀA_w + I)⁻¹A_wᵀ)J_w:
+    the Schur complement of the joint information, i.e. the θ block of the joint inverse.
+    Shape-preserving, so the widening rules read it as they read any Jacobian."""
+    W, P = jac.shape[0], jac.shape[-1]
+    a = (jac_s * prior_std).reshape(W, -1, len(prior_std))
+    u, s, _ = np.linalg.svd(a, full_matrices=False)
+    c = 1.0 - 1.0 / np.sqrt(1.0 + s**2)
+    flat = jac.reshape(W, -1, P)
+    along = np.einsum("wnm,wnp->wmp", u, flat)
+    return (flat - np.einsum("wnm,wm,wmp->wnp", u, c, along)).reshape(jac.shape)
 
 
 #: Step, in logit coordinates, of the test for which parameters the channels depend on.
@@ -340,29 +358,32 @@ def _best_start(wm, data: Problem, mask, starts: np.ndarray, effects, scale: np.
 
 
 def _residual(wm, y, mask, box: Box, effects, z0, idx, p, std):
-    """Whitened residual at p = [free logit coordinates, start-speed corrections (W or none)]."""
+    """Whitened residual at p = [free logit coordinates, (W, m) start corrections flattened:
+    (speed,) side speed, yaw rate]."""
     k = idx.shape[0]
     theta, effect_params = split_parameters(box.from_unbounded(z0.at[idx].set(p[:k])), effects)
-    pred, _ = wm(theta, effect_params, v0=wm.v0 + p[k:] if p.shape[0] > k else None)
+    off = p[k:].reshape(wm.v0.shape[0], -1)
+    v0 = wm.v0 + off[:, 0] if off.shape[1] == 3 else None
+    pred, _ = wm(theta, effect_params, v0=v0, lateral_offset=off[:, -2:])
     return jnp.where(mask[..., None], (pred - y) / std, 0.0).ravel()
 
 
-def _residual_and_jacobian(fn, k: int, p):
-    """fn(p) and its Jacobian. Window w's residual depends on its own start-speed correction
-    only, so one tangent that moves them all, split by window, gives their W columns: k + 1
-    forward tangents instead of k + W."""
-    n_v = p.shape[0] - k
+def _residual_and_jacobian(fn, k: int, m: int, p):
+    """fn(p) and its Jacobian, for p = [k shared coordinates, W windows × m start corrections]
+    and a residual whose rows are grouped by window. Window w's rows depend on its own
+    corrections only, so m tangents that move every window's alike, split by window, give their
+    W·m columns: k + m forward tangents instead of k + W·m."""
+    n_w = (p.shape[0] - k) // m
 
     def at(q):
-        r = fn(jnp.concatenate([q[:k], p[k:] + q[k:]]))
+        r = fn(jnp.concatenate([q[:k], p[k:] + jnp.tile(q[k:], n_w)]))
         return r, r
 
-    jac, r = jax.jacfwd(at, has_aux=True)(jnp.concatenate([p[:k], jnp.zeros(min(n_v, 1), p.dtype)]))
-    if n_v == 0:
-        return r, jac
-    per_window = jac[:, k].reshape(n_v, -1)
-    jac_v = (per_window[:, :, None] * jnp.eye(n_v, dtype=p.dtype)[:, None, :]).reshape(-1, n_v)
-    return r, jnp.concatenate([jac[:, :k], jac_v], axis=1)
+    jac, r = jax.jacfwd(at, has_aux=True)(jnp.concatenate([p[:k], jnp.zeros(m, p.dtype)]))
+    per_window = jac[:, k:].reshape(n_w, -1, m)
+    own = jnp.eye(n_w, dtype=p.dtype)[:, None, :, None]
+    jac_s = (per_window[:, :, None, :] * own).reshape(-1, n_w * m)
+    return r, jnp.concatenate([jac[:, :k], jac_s], axis=1)
 
 
 @eqx.filter_jit
@@ -370,8 +391,11 @@ def _lm(wm, y, mask, box: Box, effects, z0, idx, p, std, max_steps):
     """One Levenberg–Marquardt fit of the free coordinates and start-speed corrections for given
     per-channel stds; a module-level jit, so every fit of the same shapes (the reweighting passes,
     the refit) compiles once."""
-    k = idx.shape[0]
-    prec = jnp.concatenate([jnp.full(k, PRIOR_Z_STD**-2), jnp.full(p.shape[0] - k, V0_STD**-2)])
+    k, n_w = idx.shape[0], wm.v0.shape[0]
+    m = (p.shape[0] - k) // n_w
+    kinds = tuple(START_STD)[len(START_STD) - m :]
+    start_prec = jnp.asarray([START_STD[n] ** -2 for n in kinds])
+    prec = jnp.concatenate([jnp.full(k, PRIOR_Z_STD**-2), jnp.tile(start_prec, n_w)])
     fn = lambda q: _residual(wm, y, mask, box, effects, z0, idx, q, std)
     return levenberg_marquardt(
         fn,
@@ -379,7 +403,7 @@ def _lm(wm, y, mask, box: Box, effects, z0, idx, p, std, max_steps):
         prior_precision=prec.astype(p.dtype),
         max_steps=max_steps,
         max_step=MAX_Z_STEP,
-        jacobian=lambda q: _residual_and_jacobian(fn, k, q),
+        jacobian=lambda q: _residual_and_jacobian(fn, k, m, q),
     )
 
 
