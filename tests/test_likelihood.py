@@ -6,7 +6,15 @@ import pytest
 
 from vdsbi.diagnostics import fit_likelihood
 from vdsbi.io import build_recording
-from vdsbi.problem import Box, ProblemSettings, channel_scores, make_problem, prior_box, simulate_draws, windowed_model
+from vdsbi.problem import (
+    Box,
+    ProblemSettings,
+    channel_scores,
+    make_problem,
+    prior_box,
+    simulate_draws,
+    windowed_model,
+)
 from vdsbi.simulator import (
     CHANNELS,
     PARAM_NAMES,
@@ -78,6 +86,7 @@ def test_a_wrong_start_speed_is_corrected_per_window_and_leaves_the_estimate_whe
     assert np.all(np.abs(high.z - right.z) < 0.5 * sd), (high.z - right.z) / sd
     i = [PARAM_NAMES.index(n) for n in free]
     np.testing.assert_allclose(np.sqrt(np.diag(high.cov_z))[i], sd[i], rtol=0.1)
+
     # Simulated from the starts the fit inferred, each window is what the fit saw: at the noise.
     def chi2(p):
         pred = np.asarray(simulate_draws(None, windowed_model(p), high.theta[None])[0][0])
@@ -93,7 +102,7 @@ def test_the_start_columns_of_the_jacobian_come_from_one_tangent_per_kind(x64):
     import jax
     import jax.numpy as jnp
 
-    from vdsbi.diagnostics._likelihood import _residual_and_jacobian
+    from vdsbi.diagnostics._likelihood_starts import residual_and_jacobian
 
     x = jnp.asarray(np.random.default_rng(0).standard_normal((5, 2)))
 
@@ -102,13 +111,13 @@ def test_the_start_columns_of_the_jacobian_come_from_one_tangent_per_kind(x64):
         return (jnp.sin(x @ p[:2])[None, :] * (1.0 + a[:, None]) ** 2 + jnp.cos(b[:, None] * x[:, 0])).ravel()
 
     p = jnp.asarray([0.3, -0.2, 0.1, 0.4, -0.5, 0.2, 0.7, -0.3])
-    r, jac = _residual_and_jacobian(fn, 2, 2, p)
+    r, jac = residual_and_jacobian(fn, 2, 2, p)
     np.testing.assert_allclose(r, fn(p), rtol=1e-12)
     np.testing.assert_allclose(jac, jax.jacfwd(fn)(p), rtol=1e-12, atol=1e-14)
 
 
 def test_marginalising_the_window_starts_leaves_the_theta_block_of_the_joint_covariance():
-    from vdsbi.diagnostics._likelihood import _own_columns, _profiled
+    from vdsbi.diagnostics._likelihood_starts import own_columns, profiled
 
     rng = np.random.default_rng(2)
     W, K, C, P, m = 3, 7, 2, 4, 2
@@ -119,12 +128,13 @@ def test_marginalising_the_window_starts_leaves_the_theta_block_of_the_joint_cov
     joint[..., :P] = jac
     for w in range(W):
         joint[w, ..., P + w * m : P + (w + 1) * m] = jac_s[w]
-    np.testing.assert_array_equal(_own_columns(joint[..., P:], m), jac_s)
+    np.testing.assert_array_equal(own_columns(joint[..., P:], m), jac_s)
     flat_joint = joint.reshape(-1, P + W * m)
-    cov = np.linalg.inv(flat_joint.T @ flat_joint + np.diag(np.concatenate([prec, np.tile(start_std**-2, W)])))
-    flat = _profiled(jac, jac_s, start_std).reshape(-1, P)
+    joint_prec = np.concatenate([prec, np.tile(start_std**-2, W)])
+    cov = np.linalg.inv(flat_joint.T @ flat_joint + np.diag(joint_prec))
+    flat = profiled(jac, jac_s, start_std).reshape(-1, P)
     np.testing.assert_allclose(np.linalg.inv(flat.T @ flat + np.diag(prec)), cov[:P, :P], rtol=1e-10)
-    np.testing.assert_array_equal(_profiled(jac, jac_s, start_std)[2], jac[2])
+    np.testing.assert_array_equal(profiled(jac, jac_s, start_std)[2], jac[2])
 
 
 def test_a_model_error_widens_the_interval_by_its_own_scale_and_correlation(x64):

@@ -22,7 +22,7 @@ speed, which carries the speed sensor's error (a wheel radius's, or `vdsbi.io.es
 from a_y ≈ v·r) for the whole window. Such errors bend the fit or pass for model error. Each
 window's start gets corrections (`START_STD`: side speed and yaw rate; speed where torque-driven)
 with Gaussian priors, fitted with θ and marginalised out of the covariance (the Schur
-complement, `_profiled`). This is a quasi-likelihood (Heagerty & Lumley 2000 for the block view of
+complement, `profiled`). This is a quasi-likelihood (Heagerty & Lumley 2000 for the block view of
 dependent residuals; Ribatet et al. 2012 for curvature-adjusted composite likelihoods).
 """
 
@@ -46,8 +46,9 @@ from ..problem import (
     split_parameters,
     windowed_model,
 )
-from ..simulator import Solver, TorqueDriven
+from ..simulator import Solver
 from ._least_squares import laplace_covariance, levenberg_marquardt
+from ._likelihood_starts import START_STD, own_columns, profiled, residual_and_jacobian, start_kinds
 from ._likelihood_widening import BLOCK_TAUS, consistent_covariance, data_splits, robust_covariance
 
 #: Std of the Gaussian standing in for the uniform prior in each logit coordinate (the logistic
@@ -60,9 +61,6 @@ MAX_Z_STEP = 2.0
 #: problem's filter band, so the filter removes more of it than the estimate assumes; the floor
 #: keeps a fit of few effective samples from claiming less noise than it could have fitted away.
 SENSOR_SHARE = 0.25
-#: Prior std of each window's start corrections: speed (torque-driven windows), m/s; side
-#: speed, m/s; yaw rate, rad/s.
-START_STD = {"v0": 1.0, "vy0": 0.5, "r0": 0.05}
 
 
 class NoiseModel(eqx.Module):
@@ -177,9 +175,8 @@ class LikelihoodPosterior(eqx.Module):
         if len(off) != len(problem.v0):
             raise ValueError(f"{len(off)} fitted window starts, {len(problem.v0)} windows")
         vy0 = np.zeros(len(off)) if problem.vy0 is None else np.asarray(problem.vy0)
-        return dataclasses.replace(
-            problem, v0=np.asarray(problem.v0) + off[:, 0], vy0=vy0 + off[:, 1], r0=np.asarray(problem.r0) + off[:, 2]
-        )
+        v0, r0 = np.asarray(problem.v0) + off[:, 0], np.asarray(problem.r0) + off[:, 2]
+        return dataclasses.replace(problem, v0=v0, vy0=vy0 + off[:, 1], r0=r0)
 
     def mahalanobis2(self, theta) -> np.ndarray:
         """Squared Mahalanobis distance of θ (…, P) from the fit, in z (the posterior's
@@ -254,7 +251,7 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
     free = tuple(n for n in names if n in free)
     idx = np.asarray([names.index(n) for n in free], dtype=int)
     fit = _fitter(wm, data, mask, box64, effects, jnp.asarray(z0), jnp.asarray(idx), max_steps)
-    kinds = _start_kinds(data)
+    kinds = start_kinds(data)
     n_w, m = len(data.v0), len(kinds)
     z, steps, converged = jnp.asarray(np.concatenate([z0[idx], np.zeros(n_w * m)])), [], False
     for _ in range(reweights + 1):
@@ -268,11 +265,11 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
     # The Laplace covariance with the final noise model: reweight the last Jacobian's rows.
     k = len(idx)
     full = np.asarray(res.jacobian).reshape(*mask.shape, len(scale), k + n_w * m) * (std / scale)[:, None]
-    jac, jac_s = full[..., :k], _own_columns(full[..., k:], m)
+    jac, jac_s = full[..., :k], own_columns(full[..., k:], m)
     start_std = np.asarray([START_STD[n] for n in kinds])
     root_tau = np.sqrt(tau)
-    jac_tau = _profiled(jac / root_tau[:, None], jac_s / root_tau[:, None], start_std)
-    jac = _profiled(jac, jac_s, start_std)
+    jac_tau = profiled(jac / root_tau[:, None], jac_s / root_tau[:, None], start_std)
+    jac = profiled(jac, jac_s, start_std)
     prec = np.full(k, PRIOR_Z_STD**-2)
     cov_free = np.asarray(laplace_covariance(jnp.asarray(jac_tau.reshape(-1, k)), prec))
     informed = robust_covariance(cov_free, jac, resid / scale, mask, prec, BLOCK_TAUS * float(tau.max()))
@@ -293,36 +290,6 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
     return LikelihoodPosterior(
         box, z_all, cov, cov_info, free, noise, converged, steps, disagree, joint, offset
     )
-
-
-def _start_kinds(problem: Problem) -> tuple[str, ...]:
-    """The start corrections a problem's windows get (`START_STD`'s names): the speed only where
-    it is simulated from the torques."""
-    lateral = ("vy0", "r0")
-    return ("v0", *lateral) if issubclass(problem.model_class, TorqueDriven) else lateral
-
-
-def _own_columns(jac_s: np.ndarray, m: int) -> np.ndarray:
-    """(W, K, C, m) each window's derivatives by its own m start corrections, from the
-    (W, K, C, W·m) Jacobian of all of them."""
-    return np.einsum("wkcwm->wkcm", jac_s.reshape(*jac_s.shape[:-1], -1, m))
-
-
-def _profiled(jac: np.ndarray, jac_s: np.ndarray, prior_std: np.ndarray) -> np.ndarray:
-    """(W, K, C, P) Jacobian of the θ coordinates with each window's start corrections
-    (derivatives `jac_s`, (W, K, C, m), Gaussian priors of std `prior_std`) marginalised.
-
-    With A_w = j_w·diag(prior_std) = U S Vᵀ (thin SVD), window w's rows become
-    J_w − U·diag(1 − 1/√(1 + s²))·UᵀJ_w, so that J̃ᵀJ̃ = Σ_w J_wᵀ(I − A_w(A_wᵀA_w + I)⁻¹A_wᵀ)J_w:
-    the Schur complement of the joint information, i.e. the θ block of the joint inverse.
-    Shape-preserving, so the widening rules read it as they read any Jacobian."""
-    W, P = jac.shape[0], jac.shape[-1]
-    a = (jac_s * prior_std).reshape(W, -1, len(prior_std))
-    u, s, _ = np.linalg.svd(a, full_matrices=False)
-    c = 1.0 - 1.0 / np.sqrt(1.0 + s**2)
-    flat = jac.reshape(W, -1, P)
-    along = np.einsum("wnm,wnp->wmp", u, flat)
-    return (flat - np.einsum("wnm,wm,wmp->wnp", u, c, along)).reshape(jac.shape)
 
 
 #: Step, in logit coordinates, of the test for which parameters the channels depend on.
@@ -368,24 +335,6 @@ def _residual(wm, y, mask, box: Box, effects, z0, idx, p, std):
     return jnp.where(mask[..., None], (pred - y) / std, 0.0).ravel()
 
 
-def _residual_and_jacobian(fn, k: int, m: int, p):
-    """fn(p) and its Jacobian, for p = [k shared coordinates, W windows × m start corrections]
-    and a residual whose rows are grouped by window. Window w's rows depend on its own
-    corrections only, so m tangents that move every window's alike, split by window, give their
-    W·m columns: k + m forward tangents instead of k + W·m."""
-    n_w = (p.shape[0] - k) // m
-
-    def at(q):
-        r = fn(jnp.concatenate([q[:k], p[k:] + jnp.tile(q[k:], n_w)]))
-        return r, r
-
-    jac, r = jax.jacfwd(at, has_aux=True)(jnp.concatenate([p[:k], jnp.zeros(m, p.dtype)]))
-    per_window = jac[:, k:].reshape(n_w, -1, m)
-    own = jnp.eye(n_w, dtype=p.dtype)[:, None, :, None]
-    jac_s = (per_window[:, :, None, :] * own).reshape(-1, n_w * m)
-    return r, jnp.concatenate([jac[:, :k], jac_s], axis=1)
-
-
 @eqx.filter_jit
 def _lm(wm, y, mask, box: Box, effects, z0, idx, p, std, max_steps):
     """One Levenberg–Marquardt fit of the free coordinates and start-speed corrections for given
@@ -403,7 +352,7 @@ def _lm(wm, y, mask, box: Box, effects, z0, idx, p, std, max_steps):
         prior_precision=prec.astype(p.dtype),
         max_steps=max_steps,
         max_step=MAX_Z_STEP,
-        jacobian=lambda q: _residual_and_jacobian(fn, k, m, q),
+        jacobian=lambda q: residual_and_jacobian(fn, k, m, q),
     )
 
 
