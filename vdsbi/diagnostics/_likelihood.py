@@ -262,23 +262,12 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
         resid = np.asarray(res.residual).reshape(*mask.shape, len(scale)) * std
         scale = np.maximum(np.sqrt(np.sum(resid**2, axis=(0, 1)) / mask.sum()), SENSOR_SHARE * sensor)
         tau = integrated_autocorrelation_time(resid, mask)
-    # The Laplace covariance with the final noise model: reweight the last Jacobian's rows.
     k = len(idx)
-    full = np.asarray(res.jacobian).reshape(*mask.shape, len(scale), k + n_w * m) * (std / scale)[:, None]
-    jac, jac_s = full[..., :k], own_columns(full[..., k:], m)
-    start_std = np.asarray([START_STD[n] for n in kinds])
-    root_tau = np.sqrt(tau)
-    jac_tau = profiled(jac / root_tau[:, None], jac_s / root_tau[:, None], start_std)
-    jac = profiled(jac, jac_s, start_std)
-    prec = np.full(k, PRIOR_Z_STD**-2)
-    cov_free = np.asarray(laplace_covariance(jnp.asarray(jac_tau.reshape(-1, k)), prec))
-    informed = robust_covariance(cov_free, jac, resid / scale, mask, prec, BLOCK_TAUS * float(tau.max()))
-    splits = data_splits(data, mask)
-    z, offset = np.asarray(z[:k]), np.zeros((n_w, len(START_STD)))
-    offset[:, [list(START_STD).index(n) for n in kinds]] = np.asarray(res.z[k:]).reshape(n_w, m)
-    cov_free, shifts, joint = consistent_covariance(
-        informed, jac_tau, resid / scale / root_tau, z, prec, splits
-    )
+    offset = np.zeros((n_w, len(START_STD)))
+    offset[:, [list(START_STD).index(n) for n in kinds]] = np.asarray(z[k:]).reshape(n_w, m)
+    z = np.asarray(z[:k])
+    jac = np.asarray(res.jacobian).reshape(*mask.shape, len(scale), k + n_w * m) * (std / scale)[:, None]
+    cov_free, informed, shifts, joint = _covariances(data, mask, jac, resid / scale, z, tau, kinds)
     cov, cov_info = (np.diag(np.full(len(names), PRIOR_Z_STD**2)) for _ in range(2))
     cov[np.ix_(idx, idx)] = cov_free
     cov_info[np.ix_(idx, idx)] = informed
@@ -290,6 +279,25 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
     return LikelihoodPosterior(
         box, z_all, cov, cov_info, free, noise, converged, steps, disagree, joint, offset
     )
+
+
+def _covariances(data: Problem, mask, jac, r, z, tau, kinds):
+    """The Laplace covariance of the free coordinates with the final noise model, the window
+    starts marginalised, then widened by the model error (`robust_covariance`, then
+    `consistent_covariance`); `jac` (W, K, C, k + W·m) and `r` (W, K, C) whitened by the
+    residual's scale. Returns (widened, information-only, shifts, joint disagreement)."""
+    k = len(z)
+    jac, jac_s = jac[..., :k], own_columns(jac[..., k:], len(kinds))
+    start_std = np.asarray([START_STD[n] for n in kinds])
+    root_tau = np.sqrt(tau)
+    jac_tau = profiled(jac / root_tau[:, None], jac_s / root_tau[:, None], start_std)
+    jac = profiled(jac, jac_s, start_std)
+    prec = np.full(k, PRIOR_Z_STD**-2)
+    cov = np.asarray(laplace_covariance(jnp.asarray(jac_tau.reshape(-1, k)), prec))
+    informed = robust_covariance(cov, jac, r, mask, prec, BLOCK_TAUS * float(tau.max()))
+    splits = data_splits(data, mask)
+    widened, shifts, joint = consistent_covariance(informed, jac_tau, r / root_tau, z, prec, splits)
+    return widened, informed, shifts, joint
 
 
 #: Step, in logit coordinates, of the test for which parameters the channels depend on.
