@@ -80,8 +80,8 @@ def test_a_wrong_start_speed_is_corrected_per_window_and_leaves_the_estimate_whe
     biased = dataclasses.replace(prob, v0=prob.v0 + 0.5)
     high = fit_likelihood(biased, THETA, box, free=free, reweights=1, max_steps=20)
     fitted = np.asarray(prob.train).any(1)
-    assert fitted.sum() >= 2 and np.all(right.start_offset[~fitted] == 0.0)
-    np.testing.assert_allclose(high.start_offset[fitted, 0] - right.start_offset[fitted, 0], -0.5, atol=0.05)
+    assert fitted.sum() >= 2 and np.all(right.v0_offset[~fitted] == 0.0)
+    np.testing.assert_allclose(high.v0_offset[fitted] - right.v0_offset[fitted], -0.5, atol=0.05)
     sd = np.sqrt(np.diag(right.cov_z))
     assert np.all(np.abs(high.z - right.z) < 0.5 * sd), (high.z - right.z) / sd
     i = [PARAM_NAMES.index(n) for n in free]
@@ -93,48 +93,42 @@ def test_a_wrong_start_speed_is_corrected_per_window_and_leaves_the_estimate_whe
         return [v["chi2_dof"] for v in channel_scores(p, pred, p.train).values()]
 
     assert max(chi2(high.with_fitted_starts(biased))) < 1.3 < min(chi2(biased)) / 3
-    # Following the measured speed, the speed is not corrected.
+    # Following the measured speed there is nothing to correct.
     speed = make_problem(_drive(), veh, ProblemSettings(longitudinal="speed", max_window=6.0))
-    assert not np.any(fit_likelihood(speed, THETA, box, free=free, max_steps=20).start_offset[:, 0])
+    assert not np.any(fit_likelihood(speed, THETA, box, free=free, max_steps=20).v0_offset)
 
 
-def test_the_start_columns_of_the_jacobian_come_from_one_tangent_per_kind(x64):
+def test_the_start_speed_columns_of_the_jacobian_come_from_one_tangent(x64):
     import jax
     import jax.numpy as jnp
 
-    from vdsbi.diagnostics._likelihood_starts import residual_and_jacobian
+    from vdsbi.diagnostics._likelihood_start_speed import residual_and_jacobian
 
     x = jnp.asarray(np.random.default_rng(0).standard_normal((5, 2)))
-
-    def fn(p):  # window w's five residuals: the two shared coordinates and its own two corrections
-        a, b = p[2:].reshape(3, 2).T
-        return (jnp.sin(x @ p[:2])[None, :] * (1.0 + a[:, None]) ** 2 + jnp.cos(b[:, None] * x[:, 0])).ravel()
-
-    p = jnp.asarray([0.3, -0.2, 0.1, 0.4, -0.5, 0.2, 0.7, -0.3])
-    r, jac = residual_and_jacobian(fn, 2, 2, p)
+    # Window w's five residuals depend on the two shared coordinates and on its own correction.
+    fn = lambda p: (jnp.sin(x @ p[:2])[None, :] * (1.0 + p[2:, None]) ** 2 + p[2:, None] ** 3).ravel()
+    p = jnp.asarray([0.3, -0.2, 0.1, 0.4, -0.5])
+    r, jac = residual_and_jacobian(fn, 2, p)
     np.testing.assert_allclose(r, fn(p), rtol=1e-12)
     np.testing.assert_allclose(jac, jax.jacfwd(fn)(p), rtol=1e-12, atol=1e-14)
 
 
-def test_marginalising_the_window_starts_leaves_the_theta_block_of_the_joint_covariance():
-    from vdsbi.diagnostics._likelihood_starts import own_columns, profiled
+def test_marginalising_the_start_speeds_leaves_the_theta_block_of_the_joint_covariance():
+    from vdsbi.diagnostics._likelihood_start_speed import V0_STD, profiled
 
     rng = np.random.default_rng(2)
-    W, K, C, P, m = 3, 7, 2, 4, 2
-    jac, jac_s = rng.standard_normal((W, K, C, P)), rng.standard_normal((W, K, C, m))
-    jac_s[2] = 0.0  # a window with no fitted sample
-    prec, start_std = np.full(P, 0.3), np.array([0.5, 0.05])
-    joint = np.zeros((W, K, C, P + W * m))
-    joint[..., :P] = jac
+    W, K, C, P = 3, 7, 2, 4
+    jac, jac_v = rng.standard_normal((W, K, C, P)), rng.standard_normal((W, K, C))
+    jac_v[2] = 0.0  # a window with no fitted sample
+    prec = np.full(P, 0.3)
+    joint = np.zeros((W * K * C, P + W))
+    joint[:, :P] = jac.reshape(-1, P)
     for w in range(W):
-        joint[w, ..., P + w * m : P + (w + 1) * m] = jac_s[w]
-    np.testing.assert_array_equal(own_columns(joint[..., P:], m), jac_s)
-    flat_joint = joint.reshape(-1, P + W * m)
-    joint_prec = np.concatenate([prec, np.tile(start_std**-2, W)])
-    cov = np.linalg.inv(flat_joint.T @ flat_joint + np.diag(joint_prec))
-    flat = profiled(jac, jac_s, start_std).reshape(-1, P)
+        joint[w * K * C : (w + 1) * K * C, P + w] = jac_v[w].ravel()
+    cov = np.linalg.inv(joint.T @ joint + np.diag(np.concatenate([prec, np.full(W, V0_STD**-2)])))
+    flat = profiled(jac, jac_v).reshape(-1, P)
     np.testing.assert_allclose(np.linalg.inv(flat.T @ flat + np.diag(prec)), cov[:P, :P], rtol=1e-10)
-    np.testing.assert_array_equal(profiled(jac, jac_s, start_std)[2], jac[2])
+    np.testing.assert_array_equal(profiled(jac, jac_v)[2], jac[2])
 
 
 def test_a_model_error_widens_the_interval_by_its_own_scale_and_correlation(x64):

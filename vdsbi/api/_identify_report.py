@@ -52,14 +52,11 @@ def run_summary(full: Problem, samples, fit, state, run_info: dict, box: Box, ef
             "method": "best fit of all the usable driving through the simulator (maximum a posteriori "
             "under the noise model below); the reported posterior is the Laplace approximation there",
             "converged": fit.converged,
-            "start_corrections": None
-            if fit.start_offset is None
+            "start_speed_corrections": None
+            if fit.v0_offset is None or not np.any(fit.v0_offset)
             else {
-                "speed_m_s": fit.start_offset[:, 0].tolist(),
-                "side_speed_m_s": fit.start_offset[:, 1].tolist(),
-                "yaw_rate_rad_s": fit.start_offset[:, 2].tolist(),
-                "what": "each window's fitted start minus the measured one (speed: torque-driven "
-                "windows only; side speed: beyond the steady state for the measured yaw rate)",
+                "m_s": [float(v) for v in fit.v0_offset],
+                "what": "each torque-driven window's start speed as fitted, minus the measured one",
             },
             "halves_disagree": None
             if fit.inconsistency is None

@@ -14,16 +14,11 @@ fit minimises Σ_c Σ_k r_ck²/(s_c²·τ_c) + the prior term, by iterated rewei
 s and τ, refit), with `levenberg_marquardt`; the Laplace covariance (JᵀJ + prior precision)⁻¹ is
 taken with the final weights. On a simulated drive with the right model s_c → σ_c and τ_c → the
 filter's own correlation; on a real one the intervals widen by the model error, which is what
-makes them hold.
-
-Window starts: each window starts from the measured yaw rate (smoothed) with the steady side
-speed for it, which mid-manoeuvre is not the car's, and a torque-driven one from the measured
-speed, which carries the speed sensor's error (a wheel radius's, or `vdsbi.io.estimate_speed`'s
-from a_y ≈ v·r) for the whole window. Such errors bend the fit or pass for model error. Each
-window's start gets corrections (`START_STD`: side speed and yaw rate; speed where torque-driven)
-with Gaussian priors, fitted with θ and marginalised out of the covariance (the Schur
-complement, `profiled`). This is a quasi-likelihood (Heagerty & Lumley 2000 for the block view of
+makes them hold. This is a quasi-likelihood (Heagerty & Lumley 2000 for the block view of
 dependent residuals; Ribatet et al. 2012 for curvature-adjusted composite likelihoods).
+
+Start speeds: each torque-driven window's start speed is corrected with θ and marginalised
+(`vdsbi.diagnostics._likelihood_start_speed`).
 """
 
 from __future__ import annotations
@@ -48,7 +43,7 @@ from ..problem import (
 )
 from ..simulator import Solver
 from ._least_squares import laplace_covariance, levenberg_marquardt
-from ._likelihood_starts import START_STD, own_columns, profiled, residual_and_jacobian, start_kinds
+from ._likelihood_start_speed import V0_STD, corrected_windows, own_columns, profiled, residual_and_jacobian
 from ._likelihood_widening import BLOCK_TAUS, consistent_covariance, data_splits, robust_covariance
 
 #: Std of the Gaussian standing in for the uniform prior in each logit coordinate (the logistic
@@ -122,9 +117,8 @@ class LikelihoodPosterior(eqx.Module):
             them, and their variance was widened by the disagreement (`consistent_covariance`).
         inconsistency: {"split", "D2", "scale"} when two halves of the data cannot share one θ
             (`consistent_covariance`): the data's information was divided by "scale"; None when they can.
-        start_offset: (W, 3) start corrections fitted per window (`START_STD`'s: speed m/s,
-            side speed m/s, yaw rate rad/s; zero for a window without fitted samples, and the
-            speed's where the problem follows the measured speed).
+        v0_offset: (W,) start-speed corrections fitted per window, m/s (zeros where the problem
+            follows the measured speed, or a window holds no fitted sample).
     """
 
     box: Box
@@ -137,7 +131,7 @@ class LikelihoodPosterior(eqx.Module):
     steps: tuple[int, ...]
     disagreement: dict = eqx.field(default_factory=dict)
     inconsistency: dict | None = None
-    start_offset: np.ndarray | None = None
+    v0_offset: np.ndarray | None = None
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -169,14 +163,11 @@ class LikelihoodPosterior(eqx.Module):
         """`problem` (the fitted one, or the same windows with another held-out part) with each
         window's start speed corrected as the fit found: the held-out part of a fitted window is
         then predicted from the start its fitted part inferred."""
-        off = self.start_offset
-        if off is None or not np.any(off):
+        if self.v0_offset is None or not np.any(self.v0_offset):
             return problem
-        if len(off) != len(problem.v0):
-            raise ValueError(f"{len(off)} fitted window starts, {len(problem.v0)} windows")
-        vy0 = np.zeros(len(off)) if problem.vy0 is None else np.asarray(problem.vy0)
-        v0, r0 = np.asarray(problem.v0) + off[:, 0], np.asarray(problem.r0) + off[:, 2]
-        return dataclasses.replace(problem, v0=v0, vy0=vy0 + off[:, 1], r0=r0)
+        if len(self.v0_offset) != len(problem.v0):
+            raise ValueError(f"{len(self.v0_offset)} fitted start speeds, {len(problem.v0)} windows")
+        return dataclasses.replace(problem, v0=np.asarray(problem.v0) + self.v0_offset)
 
     def mahalanobis2(self, theta) -> np.ndarray:
         """Squared Mahalanobis distance of θ (…, P) from the fit, in z (the posterior's
@@ -251,9 +242,8 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
     free = tuple(n for n in names if n in free)
     idx = np.asarray([names.index(n) for n in free], dtype=int)
     fit = _fitter(wm, data, mask, box64, effects, jnp.asarray(z0), jnp.asarray(idx), max_steps)
-    kinds = start_kinds(data)
-    n_w, m = len(data.v0), len(kinds)
-    z, steps, converged = jnp.asarray(np.concatenate([z0[idx], np.zeros(n_w * m)])), [], False
+    n_v = corrected_windows(data)
+    z, steps, converged = jnp.asarray(np.concatenate([z0[idx], np.zeros(n_v)])), [], False
     for _ in range(reweights + 1):
         std = scale * np.sqrt(tau)
         res = fit(z, jnp.asarray(std))
@@ -263,11 +253,9 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
         scale = np.maximum(np.sqrt(np.sum(resid**2, axis=(0, 1)) / mask.sum()), SENSOR_SHARE * sensor)
         tau = integrated_autocorrelation_time(resid, mask)
     k = len(idx)
-    offset = np.zeros((n_w, len(START_STD)))
-    offset[:, [list(START_STD).index(n) for n in kinds]] = np.asarray(z[k:]).reshape(n_w, m)
-    z = np.asarray(z[:k])
-    jac = np.asarray(res.jacobian).reshape(*mask.shape, len(scale), k + n_w * m) * (std / scale)[:, None]
-    cov_free, informed, shifts, joint = _covariances(data, mask, jac, resid / scale, z, tau, kinds)
+    z, v0_offset = np.asarray(z[:k]), np.asarray(z[k:]) if n_v else np.zeros(len(data.v0))
+    jac = np.asarray(res.jacobian).reshape(*mask.shape, len(scale), k + n_v) * (std / scale)[:, None]
+    cov_free, informed, shifts, joint = _covariances(data, mask, jac, resid / scale, z, tau)
     cov, cov_info = (np.diag(np.full(len(names), PRIOR_Z_STD**2)) for _ in range(2))
     cov[np.ix_(idx, idx)] = cov_free
     cov_info[np.ix_(idx, idx)] = informed
@@ -277,21 +265,20 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
     disagree = {free[i]: v for i, v in shifts.items()}
     steps = tuple(steps)
     return LikelihoodPosterior(
-        box, z_all, cov, cov_info, free, noise, converged, steps, disagree, joint, offset
+        box, z_all, cov, cov_info, free, noise, converged, steps, disagree, joint, v0_offset
     )
 
 
-def _covariances(data: Problem, mask, jac, r, z, tau, kinds):
-    """The Laplace covariance of the free coordinates with the final noise model, the window
-    starts marginalised, then widened by the model error (`robust_covariance`, then
-    `consistent_covariance`); `jac` (W, K, C, k + W·m) and `r` (W, K, C) whitened by the
+def _covariances(data: Problem, mask, jac, r, z, tau):
+    """The Laplace covariance of the free coordinates with the final noise model, the start
+    speeds marginalised, then widened by the model error (`robust_covariance`, then
+    `consistent_covariance`); `jac` (W, K, C, k + start speeds) and `r` (W, K, C) whitened by the
     residual's scale. Returns (widened, information-only, shifts, joint disagreement)."""
     k = len(z)
-    jac, jac_s = jac[..., :k], own_columns(jac[..., k:], len(kinds))
-    start_std = np.asarray([START_STD[n] for n in kinds])
+    jac, jac_v = jac[..., :k], own_columns(jac[..., k:])
     root_tau = np.sqrt(tau)
-    jac_tau = profiled(jac / root_tau[:, None], jac_s / root_tau[:, None], start_std)
-    jac = profiled(jac, jac_s, start_std)
+    jac_tau = profiled(jac / root_tau[:, None], jac_v / root_tau)
+    jac = profiled(jac, jac_v)
     prec = np.full(k, PRIOR_Z_STD**-2)
     cov = np.asarray(laplace_covariance(jnp.asarray(jac_tau.reshape(-1, k)), prec))
     informed = robust_covariance(cov, jac, r, mask, prec, BLOCK_TAUS * float(tau.max()))
@@ -333,13 +320,10 @@ def _best_start(wm, data: Problem, mask, starts: np.ndarray, effects, scale: np.
 
 
 def _residual(wm, y, mask, box: Box, effects, z0, idx, p, std):
-    """Whitened residual at p = [free logit coordinates, (W, m) start corrections flattened:
-    (speed,) side speed, yaw rate]."""
+    """Whitened residual at p = [free logit coordinates, start-speed corrections (W or none)]."""
     k = idx.shape[0]
     theta, effect_params = split_parameters(box.from_unbounded(z0.at[idx].set(p[:k])), effects)
-    off = p[k:].reshape(wm.v0.shape[0], -1)
-    v0 = wm.v0 + off[:, 0] if off.shape[1] == 3 else None
-    pred, _ = wm(theta, effect_params, v0=v0, lateral_offset=off[:, -2:])
+    pred, _ = wm(theta, effect_params, v0=wm.v0 + p[k:] if p.shape[0] > k else None)
     return jnp.where(mask[..., None], (pred - y) / std, 0.0).ravel()
 
 
@@ -348,11 +332,8 @@ def _lm(wm, y, mask, box: Box, effects, z0, idx, p, std, max_steps):
     """One Levenberg–Marquardt fit of the free coordinates and start-speed corrections for given
     per-channel stds; a module-level jit, so every fit of the same shapes (the reweighting passes,
     the refit) compiles once."""
-    k, n_w = idx.shape[0], wm.v0.shape[0]
-    m = (p.shape[0] - k) // n_w
-    kinds = tuple(START_STD)[len(START_STD) - m :]
-    start_prec = jnp.asarray([START_STD[n] ** -2 for n in kinds])
-    prec = jnp.concatenate([jnp.full(k, PRIOR_Z_STD**-2), jnp.tile(start_prec, n_w)])
+    k = idx.shape[0]
+    prec = jnp.concatenate([jnp.full(k, PRIOR_Z_STD**-2), jnp.full(p.shape[0] - k, V0_STD**-2)])
     fn = lambda q: _residual(wm, y, mask, box, effects, z0, idx, q, std)
     return levenberg_marquardt(
         fn,
@@ -360,7 +341,7 @@ def _lm(wm, y, mask, box: Box, effects, z0, idx, p, std, max_steps):
         prior_precision=prec.astype(p.dtype),
         max_steps=max_steps,
         max_step=MAX_Z_STEP,
-        jacobian=lambda q: residual_and_jacobian(fn, k, m, q),
+        jacobian=lambda q: residual_and_jacobian(fn, k, q),
     )
 
 

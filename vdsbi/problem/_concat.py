@@ -73,9 +73,6 @@ def concat_problems(problems: Sequence[Problem]) -> Problem:
         held=cat("held", k, False),
         v0=np.concatenate([p.v0 for p in problems]),
         r0=np.concatenate([p.r0 for p in problems]),
-        vy0=None
-        if all(p.vy0 is None for p in problems)
-        else np.concatenate([np.zeros(len(p.v0)) if p.vy0 is None else p.vy0 for p in problems]),
         sigma=np.max([p.sigma for p in problems], axis=0),
         sigma_raw=np.max([p.sigma_raw for p in problems], axis=0),
         description={"recordings": [p.source for p in problems]}

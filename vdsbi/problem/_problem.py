@@ -107,8 +107,6 @@ class Problem:
         noise_source: channel -> where σ came from.
         description: why these windows ({"usable", "rejected", "how"}).
         warnings: the recording's warnings.
-        vy0: (W,) side speed added to each window's θ-dependent steady start, m/s (a fit's
-            correction, `vdsbi.diagnostics.LikelihoodPosterior.with_fitted_starts`), or None.
     """
 
     source: str
@@ -134,7 +132,6 @@ class Problem:
     noise_source: dict
     description: dict
     warnings: tuple[str, ...] = ()
-    vy0: np.ndarray | None = None
 
     @property
     def num_windows(self) -> int:
@@ -180,7 +177,6 @@ class Problem:
             held=cut(self.held, k_end),
             v0=self.v0[keep],
             r0=self.r0[keep],
-            vy0=None if self.vy0 is None else self.vy0[keep],
         )
 
     def inputs(self) -> Inputs:

@@ -26,16 +26,14 @@ class WindowedModel(eqx.Module):
     """A problem's W windows as one simulation (one draw; vmap over draws outside).
 
     Each window starts from the measured speed and yaw rate at its start, with the side speed
-    of the linear single-track steady state for that yaw rate under θ (plus `vy0`): the initial
-    lateral state is estimated, not assumed zero, so a window may start mid-corner. A fit may
-    correct each start (`readings`' `v0` and `lateral_offset`).
+    of the linear single-track steady state for that yaw rate under θ: the initial lateral state
+    is estimated, not assumed zero, so a window may start mid-corner.
 
     Attributes:
         model: vehicle model (its longitudinal mode and enabled effects).
         inputs: the windows' inputs, leaves stacked over windows (W, T).
         v0: (W,) initial speeds, m/s.
         r0: (W,) initial yaw rates, rad/s.
-        vy0: (W,) side speeds added to the steady starts, m/s.
         decimator: the filter shared with the measurement, or None.
         channel_index: compared channels' indices in `CHANNELS`.
         solver: integration settings.
@@ -45,35 +43,30 @@ class WindowedModel(eqx.Module):
     inputs: Inputs
     v0: Float[Array, " W"]
     r0: Float[Array, " W"]
-    vy0: Float[Array, " W"]
     decimator: Decimator | None
     channel_index: tuple[int, ...] = eqx.field(static=True)
     solver: Solver = Solver()
 
-    def lateral0(self, theta: Float[Array, "6"], v0: Float[Array, " W"]) -> Float[Array, "W 2"]:
+    def lateral0(self, theta: Float[Array, "6"]) -> Float[Array, "W 2"]:
         state = lambda v, r: jnp.stack(steady_lateral_state(theta, self.model.vehicle, v, r))
-        return jax.vmap(state)(v0, self.r0).at[:, 0].add(self.vy0)
+        return jax.vmap(state)(self.v0, self.r0)
 
     def readings(
-        self, theta: Float[Array, "6"], effect_params: tuple = (), v0=None, lateral_offset=None
+        self, theta: Float[Array, "6"], effect_params: tuple = (), v0=None
     ) -> tuple[Float[Array, "W T 6"], Bool[Array, " W"]]:
-        """Noise-free model-rate readings of every window, and per-window success flags;
-        `v0` (W,) replaces the start speeds, `lateral_offset` (W, 2) is added to the start's
-        (side speed, yaw rate)."""
+        """Noise-free model-rate readings of every window, and per-window success flags."""
         v0 = self.v0 if v0 is None else v0
-        lat = self.lateral0(theta, v0)
-        lat = lat if lateral_offset is None else lat + lateral_offset
-        one = lambda inp, v, l0: solve(self.model, theta, inp, v, effect_params, self.solver, lateral0=l0)
-        return jax.vmap(one)(self.inputs, v0, lat)
+        one = lambda inp, v, lat: solve(self.model, theta, inp, v, effect_params, self.solver, lateral0=lat)
+        return jax.vmap(one)(self.inputs, v0, self.lateral0(theta))
 
     def compare(self, readings: Float[Array, "W T 6"]) -> Float[Array, "W K C"]:
         ys = readings[..., jnp.array(self.channel_index)]
         return ys if self.decimator is None else jax.vmap(self.decimator)(ys)
 
     def __call__(
-        self, theta, effect_params: tuple = (), v0=None, lateral_offset=None
+        self, theta, effect_params: tuple = (), v0=None
     ) -> tuple[Float[Array, "W K C"], Bool[Array, ""]]:
-        ys, ok = self.readings(theta, effect_params, v0, lateral_offset)
+        ys, ok = self.readings(theta, effect_params, v0)
         return self.compare(ys), jnp.all(ok)
 
     def noisy(
@@ -112,7 +105,6 @@ def windowed_model(
         inputs=problem.inputs(),
         v0=jnp.asarray(problem.v0),
         r0=jnp.asarray(problem.r0),
-        vy0=jnp.zeros(len(problem.v0)) if problem.vy0 is None else jnp.asarray(problem.vy0),
         decimator=problem.decimator,
         channel_index=problem.channel_index,
         solver=solver,
