@@ -341,7 +341,8 @@ def _lm(wm, y, mask, box: Box, effects, z0, idx, p, std, max_steps):
         prior_precision=prec.astype(p.dtype),
         max_steps=max_steps,
         max_step=MAX_Z_STEP,
-        jacobian=lambda q: residual_and_jacobian(fn, k, q),
+        # Without start speeds to correct, the plain forward-mode Jacobian.
+        jacobian=(lambda q: residual_and_jacobian(fn, k, q)) if p.shape[0] > k else None,
     )
 
 

@@ -51,16 +51,14 @@ def profiled(jac: np.ndarray, jac_v: np.ndarray) -> np.ndarray:
 def residual_and_jacobian(fn, k: int, p):
     """fn(p) and its Jacobian. Window w's residual depends on its own start-speed correction
     only, so one tangent that moves them all, split by window, gives their W columns: k + 1
-    forward tangents instead of k + W."""
+    forward tangents instead of k + W (W ≥ 1)."""
     n_v = p.shape[0] - k
 
     def at(q):
         r = fn(jnp.concatenate([q[:k], p[k:] + q[k:]]))
         return r, r
 
-    jac, r = jax.jacfwd(at, has_aux=True)(jnp.concatenate([p[:k], jnp.zeros(min(n_v, 1), p.dtype)]))
-    if n_v == 0:
-        return r, jac
+    jac, r = jax.jacfwd(at, has_aux=True)(jnp.concatenate([p[:k], jnp.zeros(1, p.dtype)]))
     per_window = jac[:, k].reshape(n_v, -1)
     jac_v = (per_window[:, :, None] * jnp.eye(n_v, dtype=p.dtype)[:, None, :]).reshape(-1, n_v)
     return r, jnp.concatenate([jac[:, :k], jac_v], axis=1)
