@@ -14,17 +14,18 @@ residuals (N ≈ 10⁴ simulated readings). A step solves
 
 (Marquardt's scaling of the damping: every parameter is damped in its own units), clipped to
 |δ_i| ≤ `max_step`. A step is kept only if it lowers C; otherwise λ grows ×5 and the step is
-retried (at most `max_tries` times); after a kept step λ shrinks ×1/4. Every trial evaluates
-the residual with its Jacobian, so a kept step needs no second evaluation and the compiled
-program holds the residual once (the start is the loop's first trial): for a residual that is
-a simulation, compile time is most of a fit's cost, and rejected trials are rare. It stops
-when a kept step lowers C by less than `rtol` relative, when no step is found (a minimum to
-within the damping), or after `max_steps` kept-or-failed iterations. Written with
+retried (at most `max_tries` times, each costing one residual evaluation, no Jacobian); after
+a kept step λ shrinks ×1/4. The start is the loop's first trial, so the compiled program holds
+the Jacobian once: for a residual that is a simulation, compiling its Jacobian is most of a
+short fit's cost. It stops when a kept step lowers C by less than `rtol` relative, when no
+step is found (a minimum to within the damping), or after `max_steps` kept-or-failed
+iterations. Written with
 `lax.while_loop`, so it runs under `jit` and `vmap` (one data set per call; under `vmap` every
 data set iterates until the last one stops, harmlessly).
 
-A loop of our own rather than `optimistix.LevenbergMarquardt`, because that damps with λ·I
-(every parameter in the same units) and this loop takes a structured Jacobian (`jacobian=`).
+A loop of our own rather than `optimistix.LevenbergMarquardt`, because that damps with λ·I and
+re-linearises (a new Jacobian and QR solve) at every rejected trial, where this loop retries a
+rejected step for one residual evaluation and compiles once for every candidate effect.
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ class LeastSquaresResult(eqx.Module):
         residual: (N,) whitened residual at `z`.
         jacobian: (N, P) ∂residual/∂z at `z`.
         cost: C(z) including the prior term.
-        num_steps: iterations used (each up to `max_tries` residuals with their Jacobians).
+        num_steps: iterations used (each one Jacobian, plus up to `max_tries` residuals).
         converged: stopped by `rtol` or for want of a better step, not by `max_steps`.
     """
 
@@ -113,8 +114,8 @@ def levenberg_marquardt(
     prec = jnp.zeros_like(z0) if prior_precision is None else jnp.asarray(prior_precision, dtype)
     mean = jnp.zeros_like(z0) if prior_mean is None else jnp.asarray(prior_mean, dtype)
     both = (lambda z: _residual_and_jacobian(fn, z)) if jacobian is None else jacobian
-    # The start is linearised by the loop's own first trial (a step of zero), so the compiled
-    # program holds one copy of the residual and its Jacobian, not three.
+    # The start is evaluated and linearised by the loop's own first trial (a step of zero), so
+    # the compiled program holds the residual's Jacobian once.
     r_shape = jax.eval_shape(fn, z0)
     init = _State(
         z=z0,
@@ -126,7 +127,7 @@ def levenberg_marquardt(
         done=jnp.asarray(False),
         started=jnp.asarray(False),
     )
-    iteration = lambda s: _iteration(both, s, prec, mean, rtol, max_step, max_tries)
+    iteration = lambda s: _iteration(fn, both, s, prec, mean, rtol, max_step, max_tries)
     s = jax.lax.while_loop(lambda s: ~s.done & (s.steps < max_steps), iteration, init)
     return LeastSquaresResult(
         z=s.z, residual=s.r, jacobian=s.jac, cost=s.cost, num_steps=s.steps, converged=s.done
@@ -139,50 +140,49 @@ def _cost(r, z, prec, mean):
     return jnp.where(jnp.all(jnp.isfinite(r)), c, jnp.inf)
 
 
-def _iteration(both, s: _State, prec, mean, rtol, max_step: float, max_tries: int) -> _State:
+def _iteration(fn, both, s: _State, prec, mean, rtol, max_step: float, max_tries: int) -> _State:
     """One iteration: from the linearisation at `s.z`, look for a damped step that lowers C and
-    keep it (its residual and Jacobian, λ shrunk), or stop. Before the start is linearised, the
-    one trial is the start itself, which is not counted as an iteration."""
+    keep it (linearised there, λ shrunk), or stop. Before the start is linearised, the one trial
+    is the start itself, which is not counted as an iteration."""
     g = s.jac.T @ s.r + prec * (s.z - mean)
     h = s.jac.T @ s.jac + jnp.diag(prec)
     tries = jnp.where(s.started, max_tries, 1)
-    lam, z_new, r, jac, c_new, better = _damped_step(both, s, g, h, prec, mean, max_step, tries)
+    lam, z_new, c_new, better = _damped_step(fn, s, g, h, prec, mean, max_step, tries)
     rel = (s.cost - c_new) / jnp.maximum(s.cost, 1e-12)
-    done = ~better | (s.started & (rel < rtol))
     keep = better | ~s.started  # a start that cannot be evaluated is returned as it evaluated
+    # The Jacobian is needed only where a step was kept.
+    r, jac = jax.lax.cond(keep, lambda: both(z_new), lambda: (s.r, s.jac))
     return _State(
         z=jnp.where(keep, z_new, s.z),
-        r=jnp.where(keep, r, s.r),
-        jac=jnp.where(keep, jac, s.jac),
+        r=r,
+        jac=jac,
         cost=jnp.where(keep, c_new, s.cost),
         lam=jnp.where(better & s.started, jnp.maximum(lam / 4.0, 1e-7), lam),
         steps=s.steps + s.started.astype(s.steps.dtype),
-        done=done,
+        done=~better | (s.started & (rel < rtol)),
         started=jnp.asarray(True),
     )
 
 
-def _damped_step(both, s: _State, g, h, prec, mean, max_step: float, max_tries):
+def _damped_step(fn, s: _State, g, h, prec, mean, max_step: float, max_tries):
     """Solve ``(h + λ·damp)·δ = −g``, growing λ ×5 until the step lowers C or `max_tries`
-    trials are spent (a residual and its Jacobian each: a kept step needs no second
-    evaluation); returns ``(λ, z_new, r(z_new), J(z_new), C(z_new), lowered)``."""
+    trials are spent (one residual each); returns ``(λ, z_new, C(z_new), lowered)``."""
     damp = jnp.diag(jnp.diag(h) + 1e-9)
 
     def trial(t):
         lam, tries, *_ = t
         step = jnp.clip(-jnp.linalg.solve(h + lam * damp, g), -max_step, max_step)
         z_new = s.z + jnp.where(s.started, step, 0.0)
-        r, jac = both(z_new)
-        c_new = _cost(r, z_new, prec, mean)
+        c_new = _cost(fn(z_new), z_new, prec, mean)
         better = c_new < s.cost
-        return jnp.where(better, lam, 5.0 * lam), tries + 1, z_new, r, jac, c_new, better
+        return jnp.where(better, lam, 5.0 * lam), tries + 1, z_new, c_new, better
 
-    lam, _, z_new, r, jac, c_new, better = jax.lax.while_loop(
+    lam, _, z_new, c_new, better = jax.lax.while_loop(
         lambda t: ~t[-1] & (t[1] < max_tries),
         trial,
-        (s.lam, jnp.asarray(0), s.z, s.r, s.jac, s.cost, jnp.asarray(False)),
+        (s.lam, jnp.asarray(0), s.z, s.cost, jnp.asarray(False)),
     )
-    return lam, z_new, r, jac, c_new, better
+    return lam, z_new, c_new, better
 
 
 def laplace_covariance(

@@ -122,6 +122,10 @@ def _clean_batch(wm, theta, effect_params):
     return jax.vmap(lambda th, ep: wm(th, ep))(theta, effect_params)
 
 
+#: Noise-free batches of fewer draws are padded to this many.
+CLEAN_BATCH = 128
+
+
 def simulate_draws(
     key: PRNGKeyArray | None,
     wm: WindowedModel,
@@ -140,7 +144,13 @@ def simulate_draws(
         for e, p in zip(wm.model.effects, effect_params)
     )
     if key is None:
-        theta_s, ep_s = shard_draws((theta, effect_params), n)
+        # A few draws are padded to one batch size: the fit's checks, the validation and the
+        # predictive band then share one compiled program.
+        pad = max(0, CLEAN_BATCH - n)
+        theta, effect_params = jax.tree.map(
+            lambda a: jnp.concatenate([a, jnp.repeat(a[:1], pad, axis=0)]), (theta, effect_params)
+        )
+        theta_s, ep_s = shard_draws((theta, effect_params), n + pad)
         ys, ok = _clean_batch(wm, theta_s, ep_s)
     else:
         keys, theta_s, ep_s = shard_draws((jax.random.split(key, n), theta, effect_params), n)
