@@ -121,7 +121,10 @@ def _readings_jit(wm, space, z, active):
 
 @eqx.filter_jit
 def _readings_jacobian(wm, space, z, active, free):
-    return jax.jacfwd(lambda y: _readings(wm, space, z.at[free].set(y), active))(z[free])
+    """∂readings/∂z[free]; `free` padded with an out-of-range index (zero columns), so fits
+    with different numbers of free parameters share one compilation."""
+    y0 = jnp.where(free < z.size, z[jnp.minimum(free, z.size - 1)], 0.0)
+    return jax.jacfwd(lambda y: _readings(wm, space, z.at[free].set(y, mode="drop"), active))(y0)
 
 
 @eqx.filter_jit
@@ -269,7 +272,11 @@ class Fitter:
             free, cov = np.concatenate([free, unseen]), grown
         wm = self.target.wm if problem is None else self.windowed(problem)
         z = jnp.asarray(self._z_on(fit.z, problem))
-        jac = np.asarray(_readings_jacobian(wm, self.space, z, act, jnp.asarray(free)))
+        k = len(free)
+        width = self.width + (0 if problem is None else problem.num_windows - self.num_windows)
+        index = np.full(max(k, width), z.size)
+        index[:k] = free
+        jac = np.asarray(_readings_jacobian(wm, self.space, z, act, jnp.asarray(index)))[..., :k]
         return np.einsum("...k,kl,...l->...", jac, cov, jac)
 
     def fit(
