@@ -27,7 +27,7 @@ from ..problem import (
     predictive_band,
     prior_box,
 )
-from ..simulator import SpeedDriven, model_class, release_compiled_programs
+from ..simulator import SpeedDriven, get_effect, model_class, release_compiled_programs
 from ._identify_report import npe_check, ppc_summary, run_summary, run_warnings, validation_report
 from ._identify_result import IdentifyResult
 from ._progress import Progress
@@ -122,7 +122,7 @@ def identify(
     prob = _problem(recs, veh, longitudinal, segment, max_duration, bandwidth, holdout)
     full = prob if holdout == 0 else _problem(recs, veh, longitudinal, segment, max_duration, bandwidth, 0.0)
     effects = _effects(prob, effects, add_effects, say)
-    box = _box(veh, effects, priors)
+    box = _box(veh, effects, priors, grip_used(full))
     run_info = _run_info(recs, prob, settings, seed, effects, box)
     _describe(prob, full, say)
     k_id, k_val, k_post, k_band = jax.random.split(jax.random.key(int(seed)), 4)
@@ -132,35 +132,51 @@ def identify(
         estimator, npe_samples, state = _train(
             k_id, prob, box, effects, settings, state, out, progress, on_round_end, say
         )
-        starts = _starts(npe_samples, box)
-        say("fitting the likelihood posterior on the training part (best fit, model-error noise, Laplace)")
-        checked = fit_likelihood(prob, starts, box, effects=effects)
-        if holdout == 0:
-            fit = checked
-        else:
-            say("refitting on all the usable driving: the estimate and the posterior reported")
-            fit = fit_likelihood(
-                full, np.concatenate([checked.theta[None], starts]), box, effects=effects, noise=checked.noise
-            )
+        checked, fit = _fit_likelihood(prob, full, _starts(npe_samples, box), box, effects, say)
         prob, full = checked.with_fitted_starts(prob), fit.with_fitted_starts(full)
-        samples = np.asarray(fit.sample(k_post, settings.num_samples), float)
-        summary = run_summary(full, samples, fit, state, run_info, box, effects, veh)
-        summary["vehicle"] = veh.to_dict()  # the constants `vdsbi export` needs beside θ
-        summary["npe_check"] = npe_check(npe_samples, checked)
-        summary["validation"] = validation_report(prob, checked, npe_samples, effects, compare)
-        band = predictive_band(
-            k_band, prob, np.asarray(checked.predictive_draws(k_val, ppc_draws)), checked.noise.scale, effects
-        )
-        summary["ppc"] = ppc_summary(prob, band)
-        summary["warnings"] = run_warnings(
-            samples, summary, box, names or (recording, vehicle, out_dir), longitudinal
-        )
-        # Its own key: the exported draws are not the validation band's draws of another fit.
-        predictive = np.asarray(fit.predictive_draws(jax.random.fold_in(k_val, 1), ppc_draws), float)
-        result = IdentifyResult(estimator, samples, summary, out, full, band, prob, predictive)
+        names = names or (recording, vehicle, out_dir)
+        context = (veh, run_info, box, effects, compare, names, longitudinal, settings.num_samples, ppc_draws)
+        trained = (estimator, npe_samples, state)
+        result = _result((k_val, k_post, k_band), prob, full, checked, fit, trained, context, out)
         if out is not None:
-            write_outputs(out, result, prob, band)
+            write_outputs(out, result, prob, result.ppc)
     return result
+
+
+def _fit_likelihood(prob: Problem, full: Problem, starts, box: Box, effects, say):
+    """The likelihood posterior on the validation problem's training part (`checked`), then
+    refit from it on all the usable driving (`fit`: the estimate and the posterior reported);
+    one fit when nothing is held out."""
+    say("fitting the likelihood posterior on the training part (best fit, model-error noise, Laplace)")
+    checked = fit_likelihood(prob, starts, box, effects=effects)
+    if full is prob:
+        return checked, checked
+    say("refitting on all the usable driving: the estimate and the posterior reported")
+    start = np.concatenate([checked.theta[None], starts])
+    return checked, fit_likelihood(full, start, box, effects=effects, noise=checked.noise)
+
+
+def _result(keys, prob, full, checked, fit, trained, context, out) -> IdentifyResult:
+    """The reported posterior's samples and summary, the neural posterior's check, the
+    validation on the held-out part with its predictive band, the warnings and the exported
+    predictive draws."""
+    import jax
+
+    k_val, k_post, k_band = keys
+    estimator, npe_samples, state = trained
+    veh, run_info, box, effects, compare, names, longitudinal, num_samples, ppc_draws = context
+    samples = np.asarray(fit.sample(k_post, num_samples), float)
+    summary = run_summary(full, samples, fit, state, run_info, box, effects, veh)
+    summary["vehicle"] = veh.to_dict()  # the constants `vdsbi export` needs beside θ
+    summary["npe_check"] = npe_check(npe_samples, checked)
+    summary["validation"] = validation_report(prob, checked, npe_samples, effects, compare)
+    draws = np.asarray(checked.predictive_draws(k_val, ppc_draws))
+    band = predictive_band(k_band, prob, draws, checked.noise.scale, effects)
+    summary["ppc"] = ppc_summary(prob, band)
+    summary["warnings"] = run_warnings(samples, summary, box, names, longitudinal)
+    # Its own key: the exported draws are not the validation band's draws of another fit.
+    predictive = np.asarray(fit.predictive_draws(jax.random.fold_in(k_val, 1), ppc_draws), float)
+    return IdentifyResult(estimator, samples, summary, out, full, band, prob, predictive)
 
 
 def default_effects(prob: Problem) -> tuple[str, ...]:
@@ -251,7 +267,22 @@ def _effects(prob: Problem, effects, add_effects, say) -> tuple[str, ...]:
     return tuple(e for e in EFFECTS if e in wanted)
 
 
-def _box(veh, effects, priors) -> Box:
+#: The friction factors' prior reaches at least this multiple of the grip the drive used.
+GRIP_MARGIN = 1.25
+
+
+def _box(veh, effects, priors, grip: float | None) -> Box:
+    """The prior box (`prior_box`). A drive that uses `grip` × vehicle.json's μ·g needs friction
+    factors of at least `grip` (a race car's downforce included, which the model lacks): where
+    that passes the effect's bounds, the upper bound of `tyre_friction`'s factors is raised to
+    `GRIP_MARGIN` × `grip`, unless vehicle.json or `priors` set them."""
+    priors = dict(priors or {})
+    if "tyre_friction" in effects and grip is not None:
+        effect = get_effect("tyre_friction")
+        for p, (lo, hi) in zip(effect.param_names, effect.bounds):
+            name = f"tyre_friction.{p}"
+            if GRIP_MARGIN * grip > hi and name not in priors and name not in veh.prior:
+                priors[name] = (lo, GRIP_MARGIN * grip)
     try:
         bounds = prior_box(veh, effects, priors)
     except ValueError as err:
