@@ -21,8 +21,9 @@ from ._demo import DemoBudget as DemoBudget, DemoResult as DemoResult, demo as d
 from ._design import DesignReport as DesignReport, design as design
 from ._diagnose import diagnose as diagnose
 from ._export import export as export
-from ._identify import identify as identify, sample as sample
+from ._identify import identify as identify
 from ._identify_result import IdentifyResult as IdentifyResult
 from ._observability import ObservabilityResult as ObservabilityResult, observability as observability
 from ._predict import PredictResult as PredictResult, predict as predict
+from ._sample import sample as sample
 from ._simulate import SimulateResult as SimulateResult, simulate as simulate

@@ -1,5 +1,5 @@
 """`identify`: the vehicle's parameters with their posterior from one drive (or several of one car),
-checkpointed per round; `sample` from the neural estimator it saved."""
+checkpointed per round."""
 
 from __future__ import annotations
 
@@ -33,7 +33,6 @@ from ._identify_result import IdentifyResult
 from ._progress import Progress
 from .outputs import (
     CHECKPOINT,
-    ESTIMATOR,
     RUN_FILE,
     checkpoint_dir,
     write_outputs,
@@ -390,29 +389,3 @@ def _starts(npe_samples: np.ndarray, box: Box) -> np.ndarray:
     view of where the data put θ) and the prior centre."""
     centre = np.asarray(box.low + 0.5 * box.width)
     return np.concatenate([npe_samples.mean(0)[None], centre[None], npe_samples[:STARTS]])
-
-
-def sample(run_dir: str | os.PathLike, n: int, *, seed: int = 0):
-    """`n` draws from the estimator `identify` saved in `run_dir`, as a DataFrame (one column per
-    parameter).
-
-    Raises:
-        InputError: no readable estimator in `run_dir`, or `n` < 1.
-    """
-    import jax
-    import pandas as pd
-
-    from ..inference import Posterior
-    from ..simulator import PARAM_NAMES
-
-    path = Path(run_dir) / ESTIMATOR
-    if not path.is_file():
-        raise InputError(path, "DIR", "no estimator here; run `vdsbi identify` first")
-    if n < 1:
-        raise InputError("settings", "--n", f"must be >= 1, got {n}")
-    try:
-        post = Posterior.load(path)
-    except Exception as err:  # corrupt or foreign file
-        raise InputError(path, "estimator", f"cannot be read ({type(err).__name__}: {err})") from None
-    samples = np.asarray(post.sample(jax.random.key(seed), n))
-    return pd.DataFrame(samples, columns=list(post.prior.names or PARAM_NAMES))
