@@ -49,20 +49,20 @@ def test_no_effect_far_below_the_limit(x64):
     assert np.max(np.abs(scaled[:, 1] - base[:, 1])) < 1e-3 * np.max(np.abs(base[:, 1]))
 
 
-def test_identify_prior_reaches_the_grip_the_drive_used():
+def test_prior_reaches_the_grip_the_drive_used():
     # A race car that pulls 2 × vehicle.json's μ·g (slicks, downforce) needs friction factors of
     # at least 2: the box reaches past that, unless the user or vehicle.json set it.
     import dataclasses
 
-    from vdsbi.api._identify import GRIP_MARGIN, _box
+    from vdsbi.problem import GRIP_MARGIN, prior_box
 
     vehicle = default_vehicle()
-    high = lambda box: float(box.high[box.names.index("tyre_friction.scale_rear")])
-    mild = _box(vehicle, ("tyre_friction",), None, 0.9)
-    assert high(mild) == pytest.approx(1.8)  # the effect's own bound
-    assert high(_box(vehicle, ("tyre_friction",), None, 2.0)) == pytest.approx(GRIP_MARGIN * 2.0)
+    effects = ("tyre_friction",)
+    high = lambda box: box["tyre_friction.scale_rear"][1]
+    assert high(prior_box(vehicle, effects, grip=0.9)) == pytest.approx(1.8)  # the effect's own bound
+    assert high(prior_box(vehicle, effects, grip=2.0)) == pytest.approx(GRIP_MARGIN * 2.0)
     asked = {"tyre_friction.scale_rear": (0.5, 1.6)}
-    assert high(_box(vehicle, ("tyre_friction",), asked, 2.0)) == pytest.approx(1.6)
+    assert high(prior_box(vehicle, effects, asked, grip=2.0)) == pytest.approx(1.6)
     fixed = dataclasses.replace(vehicle, prior={"tyre_friction.scale_rear": (0.5, 1.7)})
-    assert high(_box(fixed, ("tyre_friction",), None, 2.0)) == pytest.approx(1.7)
-    assert _box(vehicle, (), None, 2.0).names == mild.names[:6]
+    assert high(prior_box(fixed, effects, grip=2.0)) == pytest.approx(1.7)
+    assert prior_box(vehicle, (), grip=2.0) == prior_box(vehicle, ())

@@ -27,7 +27,7 @@ from ..problem import (
     predictive_band,
     prior_box,
 )
-from ..simulator import SpeedDriven, get_effect, model_class, release_compiled_programs
+from ..simulator import SpeedDriven, model_class, release_compiled_programs
 from ._identify_report import npe_check, ppc_summary, run_summary, run_warnings, validation_report
 from ._identify_result import IdentifyResult
 from ._progress import Progress
@@ -133,10 +133,11 @@ def identify(
         )
         checked, fit = _fit_likelihood(prob, full, _starts(npe_samples, box), box, effects, say)
         prob, full = checked.with_fitted_starts(prob), fit.with_fitted_starts(full)
-        names = names or (recording, vehicle, out_dir)
-        context = (veh, run_info, box, effects, compare, names, longitudinal, settings.num_samples, ppc_draws)
-        trained = (estimator, npe_samples, state)
-        result = _result((k_val, k_post, k_band), prob, full, checked, fit, trained, context, out)
+        kw = dict(vehicle=veh, run_info=run_info, box=box, effects=effects, compare=compare)
+        kw |= dict(names=names or (recording, vehicle, out_dir), longitudinal=longitudinal)
+        kw |= dict(num_samples=settings.num_samples, ppc_draws=ppc_draws)
+        keys = (k_val, k_post, k_band)
+        result = _result(keys, prob, full, checked, fit, estimator, npe_samples, state, out, **kw)
         if out is not None:
             write_outputs(out, result, prob, result.ppc)
     return result
@@ -155,15 +156,34 @@ def _fit_likelihood(prob: Problem, full: Problem, starts, box: Box, effects, say
     return checked, fit_likelihood(full, start, box, effects=effects, noise=checked.noise)
 
 
-def _result(keys, prob, full, checked, fit, trained, context, out) -> IdentifyResult:
+def _result(
+    keys,
+    prob,
+    full,
+    checked,
+    fit,
+    estimator,
+    npe_samples,
+    state,
+    out,
+    *,
+    vehicle,
+    run_info,
+    box,
+    effects,
+    compare,
+    names,
+    longitudinal,
+    num_samples,
+    ppc_draws,
+) -> IdentifyResult:
     """The reported posterior's samples and summary, the neural posterior's check, the
     validation on the held-out part with its predictive band, the warnings and the exported
     predictive draws."""
     import jax
 
     k_val, k_post, k_band = keys
-    estimator, npe_samples, state = trained
-    veh, run_info, box, effects, compare, names, longitudinal, num_samples, ppc_draws = context
+    veh = vehicle
     samples = np.asarray(fit.sample(k_post, num_samples), float)
     summary = run_summary(full, samples, fit, state, run_info, box, effects, veh)
     summary["vehicle"] = veh.to_dict()  # the constants `vdsbi export` needs beside θ
@@ -266,24 +286,9 @@ def _effects(prob: Problem, effects, add_effects, say) -> tuple[str, ...]:
     return tuple(e for e in EFFECTS if e in wanted)
 
 
-#: The friction factors' prior reaches at least this multiple of the grip the drive used.
-GRIP_MARGIN = 1.25
-
-
 def _box(veh, effects, priors, grip: float | None) -> Box:
-    """The prior box (`prior_box`). A drive that uses `grip` × vehicle.json's μ·g needs friction
-    factors of at least `grip` (a race car's downforce included, which the model lacks): where
-    that passes the effect's bounds, the upper bound of `tyre_friction`'s factors is raised to
-    `GRIP_MARGIN` × `grip`, unless vehicle.json or `priors` set them."""
-    priors = dict(priors or {})
-    if "tyre_friction" in effects and grip is not None:
-        effect = get_effect("tyre_friction")
-        for p, (lo, hi) in zip(effect.param_names, effect.bounds):
-            name = f"tyre_friction.{p}"
-            if GRIP_MARGIN * grip > hi and name not in priors and name not in veh.prior:
-                priors[name] = (lo, GRIP_MARGIN * grip)
     try:
-        bounds = prior_box(veh, effects, priors)
+        bounds = prior_box(veh, effects, priors, grip)
     except ValueError as err:
         raise InputError("settings", "--prior", str(err)) from None
     return Box.from_dict(bounds, parameter_names(effects))

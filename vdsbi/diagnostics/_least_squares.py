@@ -19,9 +19,8 @@ a kept step λ shrinks ×1/4. The start is the loop's first trial, so the compil
 the Jacobian once: for a residual that is a simulation, compiling its Jacobian is most of a
 short fit's cost. It stops when a kept step lowers C by less than `rtol` relative, when no
 step is found (a minimum to within the damping), or after `max_steps` kept-or-failed
-iterations. Written with
-`lax.while_loop`, so it runs under `jit` and `vmap` (one data set per call; under `vmap` every
-data set iterates until the last one stops, harmlessly).
+iterations. Written with `lax.while_loop`, so it runs under `jit` and `vmap` (one data set per
+call; under `vmap` every data set iterates until the last one stops, harmlessly).
 
 A loop of our own rather than `optimistix.LevenbergMarquardt`, because that damps with λ·I and
 re-linearises (a new Jacobian and QR solve) at every rejected trial, where this loop retries a
@@ -66,9 +65,8 @@ class _State(NamedTuple):
     jac: Array
     cost: Array
     lam: Array
-    steps: Array
+    steps: Array  # -1 until the start is evaluated (the loop's first trial)
     done: Array  # converged: by `rtol`, or no better step found
-    started: Array  # the start has been evaluated
 
 
 def _residual_and_jacobian(fn, z):
@@ -123,9 +121,8 @@ def levenberg_marquardt(
         jac=jnp.zeros((*r_shape.shape, *z0.shape), r_shape.dtype),
         cost=jnp.asarray(jnp.inf, dtype),
         lam=jnp.asarray(damping, dtype),
-        steps=jnp.asarray(0),
+        steps=jnp.asarray(-1),
         done=jnp.asarray(False),
-        started=jnp.asarray(False),
     )
     iteration = lambda s: _iteration(fn, both, s, prec, mean, rtol, max_step, max_tries)
     s = jax.lax.while_loop(lambda s: ~s.done & (s.steps < max_steps), iteration, init)
@@ -144,12 +141,13 @@ def _iteration(fn, both, s: _State, prec, mean, rtol, max_step: float, max_tries
     """One iteration: from the linearisation at `s.z`, look for a damped step that lowers C and
     keep it (linearised there, λ shrunk), or stop. Before the start is linearised, the one trial
     is the start itself, which is not counted as an iteration."""
+    started = s.steps >= 0
     g = s.jac.T @ s.r + prec * (s.z - mean)
     h = s.jac.T @ s.jac + jnp.diag(prec)
-    tries = jnp.where(s.started, max_tries, 1)
+    tries = jnp.where(started, max_tries, 1)
     lam, z_new, c_new, better = _damped_step(fn, s, g, h, prec, mean, max_step, tries)
     rel = (s.cost - c_new) / jnp.maximum(s.cost, 1e-12)
-    keep = better | ~s.started  # a start that cannot be evaluated is returned as it evaluated
+    keep = better | ~started  # a start that cannot be evaluated is returned as it evaluated
     # The Jacobian is needed only where a step was kept.
     r, jac = jax.lax.cond(keep, lambda: both(z_new), lambda: (s.r, s.jac))
     return _State(
@@ -157,10 +155,9 @@ def _iteration(fn, both, s: _State, prec, mean, rtol, max_step: float, max_tries
         r=r,
         jac=jac,
         cost=jnp.where(keep, c_new, s.cost),
-        lam=jnp.where(better & s.started, jnp.maximum(lam / 4.0, 1e-7), lam),
-        steps=s.steps + s.started.astype(s.steps.dtype),
-        done=~better | (s.started & (rel < rtol)),
-        started=jnp.asarray(True),
+        lam=jnp.where(better & started, jnp.maximum(lam / 4.0, 1e-7), lam),
+        steps=s.steps + 1,
+        done=~better | (started & (rel < rtol)),
     )
 
 
@@ -172,7 +169,7 @@ def _damped_step(fn, s: _State, g, h, prec, mean, max_step: float, max_tries):
     def trial(t):
         lam, tries, *_ = t
         step = jnp.clip(-jnp.linalg.solve(h + lam * damp, g), -max_step, max_step)
-        z_new = s.z + jnp.where(s.started, step, 0.0)
+        z_new = s.z + jnp.where(s.steps >= 0, step, 0.0)
         c_new = _cost(fn(z_new), z_new, prec, mean)
         better = c_new < s.cost
         return jnp.where(better, lam, 5.0 * lam), tries + 1, z_new, c_new, better

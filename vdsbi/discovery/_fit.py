@@ -119,12 +119,23 @@ def _readings_jit(wm, space, z, active):
     return _readings(wm, space, z, active)
 
 
+def _padded(free, width: int, size: int) -> np.ndarray:
+    """`free` indices padded to `width` with the out-of-range index `size`: every number of free
+    parameters then shares one compilation (the padding's slots are read as 0 and dropped)."""
+    index = np.full(max(len(free), width), size)
+    index[: len(free)] = free
+    return index
+
+
+def _take(z, free):
+    """z[free] with the padding's slots at 0."""
+    return jnp.where(free < z.size, z[jnp.minimum(free, z.size - 1)], 0.0)
+
+
 @eqx.filter_jit
 def _readings_jacobian(wm, space, z, active, free):
-    """∂readings/∂z[free]; `free` padded with an out-of-range index (zero columns), so fits
-    with different numbers of free parameters share one compilation."""
-    y0 = jnp.where(free < z.size, z[jnp.minimum(free, z.size - 1)], 0.0)
-    return jax.jacfwd(lambda y: _readings(wm, space, z.at[free].set(y, mode="drop"), active))(y0)
+    """∂readings/∂z[free] for padded `free` (`_padded`: its slots give zero columns)."""
+    return jax.jacfwd(lambda y: _readings(wm, space, z.at[free].set(y, mode="drop"), active))(_take(z, free))
 
 
 @eqx.filter_jit
@@ -132,9 +143,8 @@ def _fit_free(space, target, z, active, free, prec, max_iter, tol):
     """Levenberg–Marquardt over the entries `free` of z (padded with an out-of-range index,
     whose slots nothing reads: their prior keeps them at 0)."""
     fn = lambda y: whitened(space, target, z.at[free].set(y, mode="drop"), active)
-    y0 = jnp.where(free < z.size, z[jnp.minimum(free, z.size - 1)], 0.0)
     return levenberg_marquardt(
-        fn, y0, prior_precision=prec, max_steps=max_iter, rtol=tol, max_step=MAX_Z_STEP
+        fn, _take(z, free), prior_precision=prec, max_steps=max_iter, rtol=tol, max_step=MAX_Z_STEP
     )
 
 
@@ -272,11 +282,9 @@ class Fitter:
             free, cov = np.concatenate([free, unseen]), grown
         wm = self.target.wm if problem is None else self.windowed(problem)
         z = jnp.asarray(self._z_on(fit.z, problem))
-        k = len(free)
         width = self.width + (0 if problem is None else problem.num_windows - self.num_windows)
-        index = np.full(max(k, width), z.size)
-        index[:k] = free
-        jac = np.asarray(_readings_jacobian(wm, self.space, z, act, jnp.asarray(index)))[..., :k]
+        index = jnp.asarray(_padded(free, width, z.size))
+        jac = np.asarray(_readings_jacobian(wm, self.space, z, act, index))[..., : len(free)]
         return np.einsum("...k,kl,...l->...", jac, cov, jac)
 
     def fit(
@@ -303,9 +311,7 @@ class Fitter:
         k = len(free)
         if k > self.width:
             raise ValueError(f"fit: {k} free parameters exceed the kernel width {self.width}")
-        # Fixed width (padding indices point past z and are dropped): one compiled kernel.
-        index = np.full(self.width, self.num_params)
-        index[:k] = free
+        index = _padded(free, self.width, self.num_params)
         prec = np.ones(self.width)
         prec[:k] = self._prior_prec()[free]
         act = jnp.asarray(self.active_mask(effects))

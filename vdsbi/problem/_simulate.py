@@ -146,11 +146,7 @@ def simulate_draws(
     if key is None:
         # A few draws are padded to one batch size: the fit's checks, the validation and the
         # predictive band then share one compiled program.
-        pad = max(0, CLEAN_BATCH - n)
-        theta, effect_params = jax.tree.map(
-            lambda a: jnp.concatenate([a, jnp.repeat(a[:1], pad, axis=0)]), (theta, effect_params)
-        )
-        theta_s, ep_s = shard_draws((theta, effect_params), n + pad)
+        theta_s, ep_s = shard_draws((theta, effect_params), n, minimum=CLEAN_BATCH)
         ys, ok = _clean_batch(wm, theta_s, ep_s)
     else:
         keys, theta_s, ep_s = shard_draws((jax.random.split(key, n), theta, effect_params), n)
