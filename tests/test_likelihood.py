@@ -223,25 +223,6 @@ def test_the_parameters_a_drive_informs_are_those_its_channels_depend_on(x64):
         assert ("C_kappa_f" in depends) == (mode == "torque"), mode
 
 
-def test_what_the_channels_do_not_see_keeps_its_prior():
-    # Following the measured speed, the slip stiffnesses act on nothing compared: from any start
-    # they sit at the box's centre with the prior's spread, so their estimate is the same every run.
-    from vdsbi.diagnostics._likelihood import PRIOR_Z_STD
-
-    veh = default_vehicle()
-    prob = make_problem(_drive(duration=8.0), veh, ProblemSettings(longitudinal="speed", max_window=6.0))
-    box = Box.from_dict(prior_box(veh), PARAM_NAMES)
-    low, width = np.asarray(box.low), np.asarray(box.width)
-    i = [PARAM_NAMES.index("C_kappa_f"), PARAM_NAMES.index("C_kappa_r")]
-    other = THETA.copy()
-    other[i] = low[i] + np.array([0.15, 0.85]) * width[i]
-    for start in (THETA, other):
-        post = fit_likelihood(prob, start, box, reweights=0, max_steps=3)
-        assert not {"C_kappa_f", "C_kappa_r"} & set(post.free)
-        np.testing.assert_allclose(post.theta[i], low[i] + 0.5 * width[i], rtol=1e-6)
-        np.testing.assert_allclose(np.diag(post.cov_z)[i], PRIOR_Z_STD**2)
-
-
 def test_a_starting_noise_model_must_be_of_the_problems_channels():
     from vdsbi.diagnostics._likelihood import NoiseModel
 

@@ -203,10 +203,9 @@ def default_effects(prob: Problem) -> tuple[str, ...]:
 
     `tyre_friction` where the drive uses more than half the grip (Dugoff leaves its linear range);
     following the measured speed with a yaw rate (a real car's log): `yaw_inertia` (a real I_z is
-    not m·l_f·l_r; left at it, the fit bends l_f to match the yaw transient), `signal_delay`
+    not m·l_f·l_r; left at it, the fit bends l_f to match the yaw transient) and `signal_delay`
     (every real log has latency between the steer signal and the motion it causes: bus, sensor
-    filters, the steering's own lag) and `sensor_bias` (every IMU reads with offsets; a phone's
-    gyro by tenths of a degree per second, which on a highway is the whole yaw rate).
+    filters, the steering's own lag).
     """
     chosen = []
     used = grip_used(prob)
@@ -215,7 +214,6 @@ def default_effects(prob: Problem) -> tuple[str, ...]:
     if issubclass(prob.model_class, SpeedDriven) and "yaw_rate" in prob.channels:
         chosen.append(("yaw_inertia", "a real car's yaw inertia is not m·l_f·l_r"))
         chosen.append(("signal_delay", "a real log's steer leads the motion it causes by its latency"))
-        chosen.append(("sensor_bias", "a real IMU reads with offsets"))
     return tuple(chosen)
 
 

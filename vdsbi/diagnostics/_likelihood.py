@@ -239,9 +239,6 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
     z0 = np.asarray(box64.to_unbounded(start, edge=1e-4))
     if free is None:
         free = _informed(wm, data, box64, z0, effects, batch=len(starts))
-        # What the channels do not see keeps its prior, centred on the box (z = 0), not on
-        # whichever start fitted best: its estimate is then the same on every run.
-        z0 = np.where(np.isin(names, free), z0, 0.0)
     free = tuple(n for n in names if n in free)
     idx = np.asarray([names.index(n) for n in free], dtype=int)
     fit = _fitter(wm, data, mask, box64, effects, jnp.asarray(z0), jnp.asarray(idx), max_steps)
