@@ -183,10 +183,9 @@ def _result(
     import jax
 
     k_val, k_post, k_band = keys
-    veh = vehicle
     samples = np.asarray(fit.sample(k_post, num_samples), float)
-    summary = run_summary(full, samples, fit, state, run_info, box, effects, veh)
-    summary["vehicle"] = veh.to_dict()  # the constants `vdsbi export` needs beside θ
+    summary = run_summary(full, samples, fit, state, run_info, box, effects, vehicle)
+    summary["vehicle"] = vehicle.to_dict()  # the constants `vdsbi export` needs beside θ
     summary["npe_check"] = npe_check(npe_samples, checked)
     summary["validation"] = validation_report(prob, checked, npe_samples, effects, compare)
     draws = np.asarray(checked.predictive_draws(k_val, ppc_draws))
