@@ -90,3 +90,8 @@ def test_registered_effect_is_searched_by_diagnose():
     finally:
         EFFECTS.pop(TowPull.name, None)
     assert TowPull.name not in effect_names()
+
+
+def test_an_effect_not_searched_is_simulated_but_no_candidate():
+    assert "steer_offset" in EFFECTS and not EFFECTS["steer_offset"].searched
+    assert "steer_offset" not in effect_names() and "steer_offset" not in effect_space().names

@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 
 from vdsbi.io import build_recording
-from vdsbi.problem import ProblemSettings, dof_factor, lag1_autocorrelation, make_problem, predict, validate
+from vdsbi.problem import (
+    ProblemSettings,
+    dof_factor,
+    lag1_autocorrelation,
+    make_problem,
+    predict,
+    validate,
+    yaw_at_zero_steer,
+)
 from vdsbi.simulator import (
     CHANNELS,
     SEED_TRUE_THETA,
@@ -171,3 +179,34 @@ def test_window_starts_move_to_quiet_moments():
     spans = [(w.t0, w.t1) for w in quiet.windows]
     assert all(abs(b0 - a1) < 1e-9 for (_, a1), (b0, _) in zip(spans, spans[1:]))
     assert all(3.0 - 1e-9 <= b - a <= 1.6 * 6.0 + 1e-9 for a, b in spans[1:-1])
+
+
+def test_a_steer_zero_off_the_straight_ahead_shows_as_yaw_at_zero_steer(x64):
+    """A log whose steer reads 2 mrad less than the wheels act: the car yaws at a logged zero
+    as it does steered steadily by 2 mrad; the honest log of the same drive shows nothing."""
+    from vdsbi.api._identify import default_effects
+
+    dt, offset = 0.005, 0.002
+    t = np.arange(0.0, 40.0, dt)
+    acting = offset + 0.004 * np.sin(2 * np.pi * t / 6.0)
+    torque = np.full_like(t, 20.0)
+    rec, vehicle = _recording(Inputs(0.0, dt, acting, 0.6 * torque, 0.4 * torque), v0=12.0, noise=0.02)
+    steady, ok = simulate(
+        THETA,
+        Inputs(0.0, dt, np.full(4000, offset), 0.6 * torque[:4000], 0.4 * torque[:4000]),
+        vehicle,
+        v0=12.0,
+    )
+    assert ok
+    r_steady = float(steady[-1, CHANNELS.index("yaw_rate")])
+
+    def problem(steer):
+        return make_problem(build_recording({"t": rec.t, "steer": steer, **rec.channels}, "log.csv"), vehicle)
+
+    yaw, share = yaw_at_zero_steer(problem(acting - offset))
+    assert share > 0.1 and yaw == pytest.approx(r_steady, rel=0.25)
+    named = lambda prob: [name for name, _ in default_effects(prob)]
+    assert "steer_offset" in named(problem(acting - offset))
+    _, share = yaw_at_zero_steer(problem(acting))
+    assert abs(share) < 0.05
+    assert "steer_offset" not in named(problem(acting))

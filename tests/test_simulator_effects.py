@@ -1,5 +1,5 @@
 """Physics effects: each moves the channels its physics says, leaves the others alone, and at its
-null parameters reproduces the base model exactly; an eleventh effect plugs in with one line.
+null parameters reproduces the base model exactly; a new effect plugs in with one line.
 
 All effect runs use one model with all ten effects enabled (so one compilation), switching an
 effect on by giving it non-null parameters."""
@@ -30,7 +30,7 @@ from vdsbi.simulator import (
 from vdsbi.simulator._effects._aero_drag import AIR_DENSITY
 
 VEHICLE = default_vehicle()
-NAMES = tuple(EFFECTS)[:10]  # the built-in ten (a test below may register more)
+NAMES = (*tuple(EFFECTS)[:10], "steer_offset")  # (a test below may register more)
 SOLVER = Solver(dt=0.005)
 V0 = 12.0
 RATE = 200.0
@@ -41,6 +41,7 @@ ACTIVE = {
     "rolling_resistance": {"c_rr": 0.015},
     "road_grade": {"grade": 0.04},
     "road_bank": {"bank": 0.04},
+    "steer_offset": {"offset": 0.004},
     "steering_lag": {"tau": 0.1},
     "torque_lag": {"tau": 0.2},
     "imu_lever_arm": {"dx": 0.6, "dy": 0.25},
@@ -50,7 +51,7 @@ ACTIVE = {
 }
 
 
-def test_built_in_effects_are_the_ten_of_the_issue():
+def test_built_in_effects_carry_consistent_metadata():
     assert set(NAMES) == set(ACTIVE)
     for cls in EFFECTS.values():
         n = len(cls.param_names)
@@ -102,6 +103,8 @@ def runs():
         maneuvers["smooth_torque_lagged"] = Inputs(
             0.0, s.dt, s.steer, TQ_0 + lagged_sine(TQ_A, W_T, tau_t, t), s.torque_rear
         )
+        offset = ACTIVE["steer_offset"]["offset"]
+        maneuvers["smooth_steer_offset"] = Inputs(0.0, s.dt, s.steer + offset, s.torque_front, s.torque_rear)
         all_model = make_model(VEHICLE, NAMES)
         _, null = effect_params_from(NAMES)
         out = {}
@@ -206,6 +209,14 @@ def test_lags_equal_base_model_driven_by_lagged_inputs(runs):
         assert np.abs(ys - runs["base", "smooth"]).max() > 30 * np.abs(ys - ref).max()
 
 
+def test_steer_offset_is_the_base_model_steered_by_the_offset_more(runs):
+    np.testing.assert_allclose(
+        runs["steer_offset", "smooth"], runs["base", "smooth_steer_offset"], rtol=1e-12, atol=1e-12
+    )
+    # a straight drive turns
+    assert np.abs(runs["steer_offset", "straight"][:, I["yaw_rate"]]).max() > 1e-3
+
+
 def test_imu_lever_arm_adds_rigid_body_terms(runs):
     dx, dy = ACTIVE["imu_lever_arm"]["dx"], ACTIVE["imu_lever_arm"]["dy"]
     base, ys = runs["base", "seed"], runs["imu_lever_arm", "seed"]
@@ -262,7 +273,7 @@ def test_wheel_radius_error_scales_wheel_speeds(runs):
     np.testing.assert_allclose(ratio, 1 / (1 + e), rtol=0.01)
 
 
-def test_eleventh_effect_takes_one_class_and_one_line(x64):
+def test_a_new_effect_takes_one_class_and_one_line(x64):
     class TowForce(AbstractEffect):
         """A constant rearward pull on the body, e.g. a trailer (felt by the accelerometer)."""
 

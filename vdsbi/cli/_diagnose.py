@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from .. import api
+from ..discovery import effect_names
 from ..io import load_drive, output_dir
 from . import _args
 
@@ -57,7 +58,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args) -> int:
-    candidates = None if args.effects is None else _args.effect_names(args.effects.split(","))
+    candidates = (
+        None if args.effects is None else _args.effect_names(args.effects.split(","), known=effect_names())
+    )
     rec, vehicle = load_drive(args.recording, args.vehicle)
     with output_dir(args.out, overwrite=args.overwrite) as d:
         res = api.diagnose(

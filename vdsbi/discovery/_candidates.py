@@ -14,8 +14,8 @@ from ..simulator import EFFECTS
 
 
 def effect_names() -> tuple[str, ...]:
-    """The registered effects, in registry order: the candidates discovery searches."""
-    return tuple(EFFECTS)
+    """The registered effects discovery searches (`searched`), in registry order."""
+    return tuple(n for n, cls in EFFECTS.items() if cls.searched)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -68,13 +68,14 @@ class DiagnoseSettings:
         return self.fit_fn or map_fit
 
     def candidate_names(self) -> tuple[str, ...]:
-        """The effects searched, in registry order (read now); ValueError on an unknown name."""
+        """The effects searched, in registry order (read now); ValueError on a name that is not
+        one of discovery's candidates (unknown, or registered with `searched = False`)."""
         known = effect_names()
         if self.candidates is None:
             return known
         unknown = set(self.candidates) - set(known)
         if unknown:
-            raise ValueError(f"candidates: unknown effect(s) {sorted(unknown)} (known: {known})")
+            raise ValueError(f"candidates: {sorted(unknown)} not among discovery's candidates {known}")
         return tuple(n for n in known if n in set(self.candidates))
 
 

@@ -25,6 +25,7 @@ from ._problem import (
     Problem as Problem,
     ProblemSettings as ProblemSettings,
     grip_used as grip_used,
+    yaw_at_zero_steer as yaw_at_zero_steer,
 )
 from ._simulate import (
     WindowedModel as WindowedModel,

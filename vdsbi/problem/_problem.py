@@ -254,3 +254,44 @@ def grip_used(problem: Problem) -> float | None:
     else:
         return None
     return float(np.quantile(np.abs(lateral), 0.99) / (problem.vehicle.friction * GRAVITY))
+
+
+def yaw_at_zero_steer(
+    problem: Problem, max_lag: float = 0.3, understeer: tuple[float, float] = (-0.01, 0.02)
+) -> tuple[float, float] | None:
+    """The yaw rate the car keeps at a logged steer of zero (at the drive's mean speed), rad/s,
+    and its share of the yaw rate's spread (std) over the compared samples; None without a yaw
+    rate or a measured speed.
+
+    A steady turn obeys r = g·v·(δ + δ₀) / (L + K·v²) whatever the tyres (K the understeer
+    gradient, s²/m): the measured yaw rate is regressed on v/(L + K·v²) and v·δ/(L + K·v²) for
+    K on a grid over `understeer` and the response lag from 0 to `max_lag` s, and the best fit's
+    g·δ₀ is a steer whose zero is not the car's straight ahead (sensor zero, alignment, crown).
+    """
+    if "yaw_rate" not in problem.channels or problem.speed is None:
+        return None
+    mask = problem.train | problem.held
+    r = problem.y[..., problem.channels.index("yaw_rate")]
+    k = r.shape[1]
+    wheelbase = problem.vehicle.wheelbase
+    v = problem.speed[:, :: problem.factor][:, :k]
+    steer = problem.u[:, :: problem.factor, 0][:, :k]
+    best = None
+    for s in range(int(round(max_lag / problem.compared_dt)) + 1):
+        m = mask[:, s:] & mask[:, : k - s]
+        if m.sum() < 3:
+            break
+        vs, rs, ds = v[:, s:][m], r[:, s:][m], steer[:, : k - s][m]
+        for gradient in np.linspace(*understeer, 31):
+            denominator = wheelbase + gradient * vs**2
+            if denominator.min() < 0.2 * wheelbase:  # at or past an oversteering car's critical speed
+                continue
+            design = np.stack([vs, vs * ds], axis=1) / denominator[:, None]
+            coef, *_ = np.linalg.lstsq(design, rs, rcond=None)
+            sse = float(np.sum((rs - design @ coef) ** 2))
+            if best is None or sse < best[0]:
+                v_mean = float(vs.mean())
+                best = (sse, float(coef[0] * v_mean / (wheelbase + gradient * v_mean**2)), float(rs.std()))
+    if best is None or best[2] == 0.0:
+        return None
+    return best[1], best[1] / best[2]

@@ -16,6 +16,7 @@ from ._rolling_resistance import RollingResistance as RollingResistance
 from ._sensor_bias import SensorBias as SensorBias
 from ._sensor_scale import SensorScale as SensorScale
 from ._signal_delay import SignalDelay as SignalDelay
+from ._steer_offset import SteerOffset as SteerOffset
 from ._steering_lag import SteeringLag as SteeringLag
 from ._torque_gain import TorqueGain as TorqueGain
 from ._torque_lag import TorqueLag as TorqueLag
@@ -82,5 +83,6 @@ for _cls in (
     SignalDelay,
     SensorScale,
     YawInertia,
+    SteerOffset,
 ):
     register_effect(_cls)

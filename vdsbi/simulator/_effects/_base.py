@@ -45,6 +45,7 @@ class AbstractEffect(eqx.Module):
       `typical` so an estimate is not pinned by the bound (physical sign constraints where
       they exist);
     - `start`: where a fit starts when the effect is switched on, strictly inside `bounds`.
+    - `searched`: whether discovery's search includes it (default True).
 
     `register_effect` checks them. Hooks receive `p`, the effect's parameter vector.
     """
@@ -58,6 +59,7 @@ class AbstractEffect(eqx.Module):
     start: AbstractClassVar[tuple[float, ...]]
     description: AbstractClassVar[str]
     num_states: ClassVar[int] = 0
+    searched: ClassVar[bool] = True
 
     def init_state(self, p, u0: Float[Array, "3"]) -> Float[Array, " S"]:
         return jnp.zeros(self.num_states)
