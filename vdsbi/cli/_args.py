@@ -84,7 +84,9 @@ def effect_names(
     out = [n.strip() for n in names]
     bad = [n for n in out if n not in known]
     if bad:
-        raise InputError(flag, bad[0], f"unknown effect; expected some of {', '.join(known)}")
+        raise InputError(
+            flag, bad[0], f"not an effect this command takes; expected some of {', '.join(known)}"
+        )
     return out
 
 
