@@ -26,9 +26,9 @@ from ..problem import (
     parameter_names,
     predictive_band,
     prior_box,
-    yaw_at_zero_steer,
 )
 from ..simulator import SpeedDriven, model_class, release_compiled_programs
+from ._default_effects import default_effects
 from ._identify_report import npe_check, ppc_summary, run_summary, run_warnings, validation_report
 from ._identify_result import IdentifyResult
 from ._progress import Progress
@@ -196,37 +196,6 @@ def _result(
     # Its own key: the exported draws are not the validation band's draws of another fit.
     predictive = np.asarray(fit.predictive_draws(jax.random.fold_in(k_val, 1), ppc_draws), float)
     return IdentifyResult(estimator, samples, summary, out, full, band, prob, predictive)
-
-
-def default_effects(prob: Problem) -> tuple[str, ...]:
-    """The effects every drive of this kind needs, with the reason for each.
-
-    `tyre_friction` where the drive uses more than half the grip (Dugoff leaves its linear range);
-    following the measured speed with a yaw rate (a real car's log): `yaw_inertia` (a real I_z is
-    not m·l_f·l_r; left at it, the fit bends l_f to match the yaw transient), `signal_delay`
-    (every real log has latency between the steer signal and the motion it causes: bus, sensor
-    filters, the steering's own lag); and `steer_offset` where the car keeps a yaw rate at a
-    logged steer of zero worth more than a tenth of the yaw rate's spread (`yaw_at_zero_steer`:
-    a steer sensor's zero, alignment or road crown; on a mild drive it is most of the misfit,
-    on a drive without it the share stays below 0.05).
-    """
-    chosen = []
-    used = grip_used(prob)
-    if used is not None and used > 0.5:
-        chosen.append(("tyre_friction", f"the drive uses {used:.0%} of the grip μ·g"))
-    if issubclass(prob.model_class, SpeedDriven) and "yaw_rate" in prob.channels:
-        chosen.append(("yaw_inertia", "a real car's yaw inertia is not m·l_f·l_r"))
-        chosen.append(("signal_delay", "a real log's steer leads the motion it causes by its latency"))
-        offset = yaw_at_zero_steer(prob)
-        if offset is not None and abs(offset[1]) > 0.1:
-            chosen.append(
-                (
-                    "steer_offset",
-                    f"at a logged steer of zero the car yaws {offset[0]:+.4f} rad/s "
-                    f"({abs(offset[1]):.0%} of the yaw rate's spread)",
-                )
-            )
-    return tuple(chosen)
 
 
 def _load(recording, vehicle, rate: float):
