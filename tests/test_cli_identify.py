@@ -163,10 +163,11 @@ def test_compilation_cache_folder_from_the_environment(tmp_path):
 def test_the_command_adds_its_xla_flags_and_keeps_the_users():
     from vdsbi.cli._main import xla_flags
 
-    assert xla_flags({}) == "--xla_cpu_use_fusion_emitters=false"
+    added = "--xla_cpu_use_fusion_emitters=false --xla_backend_optimization_level=1"
+    assert xla_flags({}) == added
     own = "--xla_force_host_platform_device_count=4"
-    assert xla_flags({"XLA_FLAGS": own}) == f"{own} --xla_cpu_use_fusion_emitters=false"
-    mine = "--xla_cpu_use_fusion_emitters=true"
+    assert xla_flags({"XLA_FLAGS": own}) == f"{own} {added}"
+    mine = "--xla_cpu_use_fusion_emitters=true --xla_backend_optimization_level=3"
     assert xla_flags({"XLA_FLAGS": mine}) == mine
 
 
@@ -178,7 +179,8 @@ def test_the_xla_flags_reach_a_command_started_by_entry():
     code += "import atexit; atexit.register(lambda: print('FLAGS=' + os.environ['XLA_FLAGS']))\nentry()"
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
-    assert "FLAGS=--xla_cpu_use_fusion_emitters=false" in proc.stdout, proc.stderr[-2000:]
+    added = "--xla_cpu_use_fusion_emitters=false --xla_backend_optimization_level=1"
+    assert f"FLAGS={added}" in proc.stdout, proc.stderr[-2000:]
 
 
 def _numbers(run_dir: Path) -> tuple[np.ndarray, dict]:

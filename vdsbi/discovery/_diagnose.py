@@ -20,7 +20,7 @@ import numpy as np
 from ..diagnostics import Localisation, MisspecificationTest, locate_mismatch, misspecification_test
 from ..io import Recording, read_recording, read_vehicle
 from ..problem import Box, Problem, ProblemSettings, longitudinal_mode, make_problem
-from ..simulator import PARAM_NAMES, SpeedDriven, Vehicle, model_class
+from ..simulator import PARAM_NAMES, SpeedDriven, Vehicle, ahead_of_time, model_class
 from ._candidates import effect_space, label
 from ._data import compared_inputs, held_out_scores
 from ._fit import Fitter
@@ -322,6 +322,8 @@ def diagnose_mismatch(
 def _find(windows: Problem, vehicle: Vehicle, s: DiagnoseSettings, names: tuple[str, ...], say) -> Findings:
     """Every stage after cutting the windows, up to the verdict."""
     coarse, fitter = _fitters(windows, s)
+    # The fine step's programs compile on the other core while the coarse search runs.
+    ahead_of_time(fitter.precompile, windows)
     fitted = fitter.problem
     base_c, base = _fit_base(coarse, fitter, vehicle, s, say)
     before = _check(base, fitted, s.seed, s)

@@ -114,11 +114,6 @@ def whitened(space: Space, target: _Target, z, active):
     return r.reshape(-1)
 
 
-@eqx.filter_jit
-def _readings_jit(wm, space, z, active):
-    return _readings(wm, space, z, active)
-
-
 def _padded(free, width: int, size: int) -> np.ndarray:
     """`free` indices padded to `width` with the out-of-range index `size`: every number of free
     parameters then shares one compilation (the padding's slots are read as 0 and dropped)."""
@@ -133,9 +128,12 @@ def _take(z, free):
 
 
 @eqx.filter_jit
-def _readings_jacobian(wm, space, z, active, free):
-    """∂readings/∂z[free] for padded `free` (`_padded`: its slots give zero columns)."""
-    return jax.jacfwd(lambda y: _readings(wm, space, z.at[free].set(y, mode="drop"), active))(_take(z, free))
+def _linearised(wm, space, z, active, free):
+    """The readings at z and ∂readings/∂z[free] for padded `free` (`_padded`: its slots give zero
+    columns); one program serves predictions and their variances."""
+    fn = lambda y: (r := _readings(wm, space, z.at[free].set(y, mode="drop"), active), r)
+    jac, readings = jax.jacfwd(fn, has_aux=True)(_take(z, free))
+    return readings, jac
 
 
 @eqx.filter_jit
@@ -263,15 +261,23 @@ class Fitter:
         """(W, K, C) noise-free compared samples of the windows of `problem` (default: the
         fitted ones, truncated after the last training sample); windows the fit did not see
         start from their measured speed."""
+        return self._linearised(z, effects, problem)[0]
+
+    def _linearised(self, z, effects: Sequence[str], problem: Problem | None, free=()):
+        """(readings, ∂readings/∂z[free]) on the windows of `problem` (`_linearised`), z on the
+        fitted windows; `free` indexes z on `problem`'s windows."""
         act = jnp.asarray(self.active_mask(effects))
         wm = self.target.wm if problem is None else self.windowed(problem)
-        return np.asarray(_readings_jit(wm, self.space, jnp.asarray(self._z_on(z, problem)), act))
+        z = jnp.asarray(self._z_on(z, problem))
+        width = self.width + (0 if problem is None else problem.num_windows - self.num_windows)
+        index = jnp.asarray(_padded(np.asarray(free, int), width, z.size))
+        readings, jac = _linearised(wm, self.space, z, act, index)
+        return np.asarray(readings), np.asarray(jac)[..., : len(free)]
 
     def prediction_variance(self, fit: DiscoveryFit, problem: Problem | None = None) -> np.ndarray:
         """(W, K, C) variance of `predict`'s samples that the fit's parameter uncertainty (its
         Laplace covariance, linearised) carries; the initial speeds of windows the fit did not
         see keep their prior std `V0_PRIOR_STD` (inflated like the fit's covariance)."""
-        act = jnp.asarray(self.active_mask(fit.effects))
         to, unseen = self._on(problem)
         free, cov = (fit.free, fit.cov) if to is None else (to[fit.free], fit.cov)
         if unseen.size:
@@ -280,12 +286,14 @@ class Fitter:
             grown[:k, :k] = cov
             grown[k:, k:] = np.eye(unseen.size) * V0_PRIOR_STD**2 * max(1.0, fit.chi2_dof)
             free, cov = np.concatenate([free, unseen]), grown
-        wm = self.target.wm if problem is None else self.windowed(problem)
-        z = jnp.asarray(self._z_on(fit.z, problem))
-        width = self.width + (0 if problem is None else problem.num_windows - self.num_windows)
-        index = jnp.asarray(_padded(free, width, z.size))
-        jac = np.asarray(_readings_jacobian(wm, self.space, z, act, index))[..., : len(free)]
+        jac = self._linearised(fit.z, fit.effects, problem, free)[1]
         return np.einsum("...k,kl,...l->...", jac, cov, jac)
+
+    def precompile(self, problem: Problem) -> None:
+        """One cheap fit of the base model and its prediction on the windows of `problem`: the
+        programs `fit`, `predict` and `prediction_variance` run are then compiled (in any
+        thread)."""
+        self.predict(self.fit((), max_iter=1).z, (), problem)
 
     def fit(
         self,

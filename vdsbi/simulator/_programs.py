@@ -1,4 +1,5 @@
-"""Keep a long-lived process under the kernel's limit on memory mappings.
+"""Compiled programs: keep a long-lived process under the kernel's limit on memory mappings, and
+compile a later stage's programs while this one runs.
 
 XLA:CPU maps each compiled program's code into memory in several pieces, and JAX keeps every
 program it compiled for as long as the function it was compiled for lives (module-level jitted
@@ -8,11 +9,17 @@ after another — runs into Linux's ``vm.max_map_count`` (65 530 by default), an
 compilation dies with a segmentation fault or an abort, which nothing in Python can catch.
 `release_compiled_programs` drops JAX's compiled programs when the process has used more than
 a fraction of the limit; they are recompiled when next needed.
+
+XLA compiles one program on one core, and a stage that simulates one trajectory at a time keeps
+about one core busy: `ahead_of_time` runs a small call of a later stage in a second thread, so
+the programs that stage needs are compiled (and cached by their functions) by the time it runs.
 """
 
 from __future__ import annotations
 
 import gc
+import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import jax
@@ -42,3 +49,25 @@ def release_compiled_programs(fraction: float = 0.5) -> bool:
     jax.clear_caches()
     gc.collect()  # the executables' mappings go when their last Python reference does
     return True
+
+
+def ahead_of_time(fn: Callable, /, *args, **kwargs) -> threading.Thread:
+    """Call ``fn(*args, **kwargs)`` in a new thread, under the caller's float64 setting, and
+    discard what it returns: the jitted functions it calls compile their programs for these
+    argument shapes, and a later call of the same shapes in any thread finds them compiled.
+
+    Make it a cheap call (one iteration, one draw): it shares the cores with the work this
+    thread goes on with. The thread is joined at interpreter exit, not killed mid-compilation.
+    """
+    x64 = bool(jax.config.jax_enable_x64)  # the setting is per thread
+
+    def run():
+        with jax.enable_x64(x64):
+            try:
+                fn(*args, **kwargs)
+            except Exception:  # noqa: BLE001 — the stage's own call compiles, and raises, itself
+                pass
+
+    thread = threading.Thread(target=run, name=f"ahead-of-time {getattr(fn, '__name__', fn)}")
+    thread.start()
+    return thread
