@@ -169,7 +169,7 @@ def _search(
     """Forward selection at the coarse step: singles from the base fit, then one effect at a
     time added on the refitted set while the evidence gain is strong (`forward_search`)."""
     fit_fn = lambda cand, z0: s.fit(coarse, cand, z0, s.single_iters)
-    found = forward_search(fit_fn, base_c, names, s.max_effects)
+    found = forward_search(fit_fn, base_c, names, s.max_effects, s.workers)
     ranked = rank(found.fits, base_c)
     singles = [r for r in ranked if len(r.effects) == 1]
     say("singles: " + ", ".join(f"{r.name} {r.score:.1f}" for r in singles[:5]))

@@ -23,7 +23,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
-from ..simulator import release_compiled_programs
+from ..simulator import release_compiled_programs, thread_map
 from ._candidates import label
 from ._rank import STRONG, bic_score
 from ._results import DiscoveryFit
@@ -52,16 +52,13 @@ def _ordered(effects, names: Sequence[str]) -> tuple[str, ...]:
     return tuple(sorted(effects, key=list(names).index))
 
 
-def _step(current, names, fits, fit_fn) -> Step:
-    gains = {}
-    for e in names:
-        if e in current:
-            continue
-        cand = _ordered(current + (e,), names)
-        if cand not in fits:
-            release_compiled_programs()  # each candidate compiles programs of its own
-            fits[cand] = fit_fn(cand, fits[current].z)
-        gains[e] = float(bic_score(fits[cand], fits[current]))
+def _step(current, names, fits, fit_fn, workers: int) -> Step:
+    tried = {e: _ordered(current + (e,), names) for e in names if e not in current}
+    todo = [c for c in tried.values() if c not in fits]
+    release_compiled_programs()  # a process that has compiled many programs stays under the limit
+    z0 = fits[current].z
+    fits.update(zip(todo, thread_map(lambda cand: fit_fn(cand, z0), todo, workers)))
+    gains = {e: float(bic_score(fits[cand], fits[current])) for e, cand in tried.items()}
     if not gains:
         return Step(current, None, gains, [])
     best = max(gains, key=gains.get)
@@ -76,6 +73,7 @@ def forward_search(
     base: DiscoveryFit,
     names: Sequence[str],
     max_effects: int = 3,
+    workers: int = 1,
 ) -> ForwardSearch:
     """Forward selection over `names` (see the module docstring).
 
@@ -84,6 +82,8 @@ def forward_search(
         base: the base model's fit ("none").
         names: the candidate effects.
         max_effects: most effects selected (1: singles only).
+        workers: threads fitting a step's candidates side by side (`thread_map`; fit_fn must
+            then be safe to call from several threads at once).
 
     Returns:
         `ForwardSearch`: all fits, the steps taken, and the selected effects (possibly none).
@@ -95,7 +95,7 @@ def forward_search(
     for _ in range(2 * max(1, max_effects) + 2):
         if len(current) >= max(1, max_effects):
             break
-        step = _step(current, tuple(names), fits, fit_fn)
+        step = _step(current, tuple(names), fits, fit_fn, workers)
         if step.added is None:
             steps.append(step)
             break

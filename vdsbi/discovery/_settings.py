@@ -39,6 +39,8 @@ class DiagnoseSettings:
         search_dt, final_dt: RK4 steps, s, of the candidate search and of the base/final fits
             (the test and the held-out comparison use the final step).
         fit_fn: `(fitter, effects, z0, max_iter) -> DiscoveryFit`; default `map_fit`.
+        workers: threads fitting a search step's candidates side by side (each fit keeps about
+            one core busy; a `fit_fn` must then be safe to call from several threads).
         max_terms: most candidate terms (`simulator.TERMS`) used to describe a mismatch the
             chosen effects leave (p after the fix < alpha); 0: no term search.
         quiet: no progress lines.
@@ -59,6 +61,7 @@ class DiagnoseSettings:
     search_dt: float = 0.005
     final_dt: float = 0.0025
     fit_fn: FitFn | None = None
+    workers: int = 2
     max_terms: int = 3
     quiet: bool = True
     plots: bool = True

@@ -31,6 +31,7 @@ from ._programs import (
     ahead_of_time as ahead_of_time,
     memory_map_usage as memory_map_usage,
     release_compiled_programs as release_compiled_programs,
+    thread_map as thread_map,
 )
 from ._sensors import (
     SEED_RELATIVE_NOISE as SEED_RELATIVE_NOISE,

@@ -12,14 +12,16 @@ a fraction of the limit; they are recompiled when next needed.
 
 XLA compiles one program on one core, and a stage that simulates one trajectory at a time keeps
 about one core busy: `ahead_of_time` runs a small call of a later stage in a second thread, so
-the programs that stage needs are compiled (and cached by their functions) by the time it runs.
+the programs that stage needs are compiled (and cached by their functions) by the time it runs,
+and `thread_map` runs independent calls of such a stage side by side.
 """
 
 from __future__ import annotations
 
 import gc
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import jax
@@ -71,3 +73,20 @@ def ahead_of_time(fn: Callable, /, *args, **kwargs) -> threading.Thread:
     thread = threading.Thread(target=run, name=f"ahead-of-time {getattr(fn, '__name__', fn)}")
     thread.start()
     return thread
+
+
+def thread_map(fn: Callable, items: Iterable, workers: int = 2) -> list:
+    """``[fn(x) for x in items]``, on ``workers`` threads under the caller's float64 setting (1:
+    in this thread). JAX releases the interpreter while a program runs, so fits that each keep
+    one core busy run side by side; the results are those of the loop, in its order."""
+    items = list(items)
+    if workers <= 1 or len(items) <= 1:
+        return [fn(x) for x in items]
+    x64 = bool(jax.config.jax_enable_x64)
+
+    def run(x):
+        with jax.enable_x64(x64):
+            return fn(x)
+
+    with ThreadPoolExecutor(min(workers, len(items))) as pool:
+        return list(pool.map(run, items))
