@@ -37,11 +37,7 @@ def test_demo_runs_the_whole_loop_into_one_folder(tmp_path):
         identify={"ppc_draws": 30},
     )
     out = tmp_path / "demo"
-    said: list[str] = []
-    res = api.demo(out, budget=budget, log=said.append)
-    # The diagnosis runs beside the base identify, and its lines are said after the identify's.
-    step = lambda prefix: next(i for i, line in enumerate(said) if line.startswith(prefix))
-    assert step("2/5") < step("param") < step("3/5") < step("chosen: sensor_bias") < step("4/5")
+    res = api.demo(out, budget=budget)
     # The base model misses the biased accelerometer by far more than its noise: said, with the
     # command to run.
     (miss,) = [w for w in res.identified.summary["warnings"] if w["kind"] == "model_error"]

@@ -10,7 +10,6 @@ import json
 import os
 import time
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from ..io import output_dir
@@ -161,20 +160,12 @@ def demo(
         say(f"1/5 simulating a {b.duration:g} s drive of the built-in vehicle with a concealed effect")
         truth = demo_recording(d, duration=b.duration, seed=seed)
         rec, veh = _drive(d, name)
-        # The diagnosis needs only the drive: it runs beside the base identify (each keeps about
-        # one core busy), and its lines are said once the identify's are.
-        lines: list[str] = []
-        with ThreadPoolExecutor(1) as pool:
-            kw = dict(seed=seed, quiet=log is None, options=b.diagnose, say=lines.append)
-            diagnosing = pool.submit(_diagnose, rec, veh, d, name, **kw) if run_diagnosis else None
-            say(f"2/5 identify with the base model: {b.base_rounds} round(s) x {b.sims} simulations")
-            # Flagged anyway: no point spending more rounds on it.
-            base = run(rec, veh, d, name, "identify", (), rounds=b.base_rounds)
-            report = None if diagnosing is None else diagnosing.result()
-        runs, diagnosis = [("base model", "identify", base)], "skipped (--no-diagnose)"
-        if report is not None:
-            for line in lines:
-                say(line)
+        say(f"2/5 identify with the base model: {b.base_rounds} round(s) x {b.sims} simulations")
+        # Flagged anyway: no point spending more rounds on it.
+        base = run(rec, veh, d, name, "identify", (), rounds=b.base_rounds)
+        runs, diagnosis, report = [("base model", "identify", base)], "skipped (--no-diagnose)", None
+        if run_diagnosis:
+            report = _diagnose(rec, veh, d, name, seed=seed, quiet=log is None, options=b.diagnose, say=say)
             diagnosis = _diagnosis(report)
             if report["chosen"]:
                 say(f"4/5 identify again, as diagnose says: {report['identify_command']}")
@@ -194,10 +185,11 @@ def _names(name: Path, folder: str) -> tuple[Path, Path, Path]:
 
 
 def _diagnose(rec, veh, d: Path, name: Path, *, seed: int, quiet: bool, options: dict, say) -> dict:
-    """The diagnosis of the demo drive into d/diagnose, its progress lines to `say`; its report."""
+    """The diagnosis of the demo drive into d/diagnose; its report."""
     say("3/5 diagnose: looking for missing physics")
-    where = _names(name, "diagnose")
-    res = diagnose(rec, veh, d / "diagnose", names=where, seed=seed, quiet=quiet, log=say, **options)
+    res = diagnose(
+        rec, veh, d / "diagnose", names=_names(name, "diagnose"), seed=seed, quiet=quiet, **options
+    )
     return res.report
 
 

@@ -289,7 +289,7 @@ def diagnose_mismatch(
         `DiagnosisResult`.
     """
     s = dataclasses.replace(settings or DiagnoseSettings(), **options)
-    say = Progress(s.quiet, s.log)
+    say = Progress(s.quiet)
     vehicle = vehicle if isinstance(vehicle, Vehicle) else read_vehicle(vehicle)
     recording = recording if isinstance(recording, Recording) else read_recording(recording)
     names = s.candidate_names()

@@ -44,7 +44,6 @@ class DiagnoseSettings:
         max_terms: most candidate terms (`simulator.TERMS`) used to describe a mismatch the
             chosen effects leave (p after the fix < alpha); 0: no term search.
         quiet: no progress lines.
-        log: where progress lines go (default: printed).
         plots: write the figures (with `out_dir`).
     """
 
@@ -65,7 +64,6 @@ class DiagnoseSettings:
     workers: int = 2
     max_terms: int = 3
     quiet: bool = True
-    log: Callable[[str], None] | None = None
     plots: bool = True
 
     @property
@@ -85,11 +83,10 @@ class DiagnoseSettings:
 
 
 class Progress:
-    """Progress lines to `log` (default: printed; none when quiet); `seconds` since the start."""
+    """Progress lines (none when quiet); `seconds` since the start."""
 
-    def __init__(self, quiet: bool, log: Callable[[str], None] | None = None):
+    def __init__(self, quiet: bool):
         self.quiet, self.t_start = quiet, time.perf_counter()
-        self.log = log or (lambda msg: print(msg, flush=True))
 
     @property
     def seconds(self) -> float:
@@ -97,4 +94,4 @@ class Progress:
 
     def __call__(self, msg: str) -> None:
         if not self.quiet:
-            self.log(msg)
+            print(msg, flush=True)
