@@ -128,8 +128,12 @@ def _fitters(windows: Problem, s: DiagnoseSettings) -> tuple[Fitter, Fitter]:
 def _fit_base(coarse: Fitter, fitter: Fitter, vehicle: Vehicle, s: DiagnoseSettings, say):
     """The base model from two starts (middle of the prior box, and a typical passenger car),
     searched with the coarse step, then polished with the fine one."""
+    # The fine step's programs compile on the other core while the coarse fits run; the polish
+    # waits for them rather than compile them a second time.
+    compiling = ahead_of_time(fitter.fit, (), max_iter=1)
     starts = [None, coarse.initial_z(typical_theta(vehicle))]
     base_c = min((s.fit(coarse, (), z, s.final_iters) for z in starts), key=lambda f: f.chi2)
+    compiling.join()
     base = s.fit(fitter, (), base_c.z, max(4, s.final_iters // 2))
     say(f"base fit: χ²/dof {base.chi2_dof:.3f} ({base.iterations} it, {say.seconds:.0f} s)")
     return base_c, base
@@ -322,10 +326,9 @@ def diagnose_mismatch(
 def _find(windows: Problem, vehicle: Vehicle, s: DiagnoseSettings, names: tuple[str, ...], say) -> Findings:
     """Every stage after cutting the windows, up to the verdict."""
     coarse, fitter = _fitters(windows, s)
-    # The fine step's programs compile on the other core while the coarse search runs.
-    ahead_of_time(fitter.precompile, windows)
     fitted = fitter.problem
     base_c, base = _fit_base(coarse, fitter, vehicle, s, say)
+    ahead_of_time(fitter.predict, base.z, (), windows)  # the held-out comparison's, during the search
     before = _check(base, fitted, s.seed, s)
     loc, detected = _locate(before, fitted, s, say)
     search = _search(coarse, base_c, names, s, say)

@@ -289,12 +289,6 @@ class Fitter:
         jac = self._linearised(fit.z, fit.effects, problem, free)[1]
         return np.einsum("...k,kl,...l->...", jac, cov, jac)
 
-    def precompile(self, problem: Problem) -> None:
-        """One cheap fit of the base model and its prediction on the windows of `problem`: the
-        programs `fit`, `predict` and `prediction_variance` run are then compiled (in any
-        thread)."""
-        self.predict(self.fit((), max_iter=1).z, (), problem)
-
     def fit(
         self,
         effects: Sequence[str] = (),
