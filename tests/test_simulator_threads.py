@@ -1,10 +1,10 @@
-"""`ahead_of_time` and `thread_map`: work on other threads under the caller's float64 setting."""
+"""`in_background` and `thread_map`: work on other threads under the caller's float64 setting."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vdsbi.simulator import ahead_of_time, thread_map
+from vdsbi.simulator import in_background, thread_map
 
 
 def test_thread_map_is_the_loop_in_its_order_with_the_callers_float64():
@@ -31,7 +31,7 @@ def test_thread_map_raises_what_a_call_raises():
         raise AssertionError("thread_map swallowed the error")
 
 
-def test_a_program_compiled_ahead_of_time_is_not_traced_again():
+def test_a_program_compiled_in_the_background_is_not_traced_again():
     traces = []
 
     @jax.jit
@@ -41,16 +41,15 @@ def test_a_program_compiled_ahead_of_time_is_not_traced_again():
 
     with jax.enable_x64(True):
         x = jnp.ones(5)
-        ahead_of_time(f, x).join()
+        in_background(f, x).result()
         assert traces == [jnp.dtype("float64")]  # compiled in float64, as its caller runs
         assert np.isclose(float(f(x)), 5 * np.sin(1.0))
     assert len(traces) == 1
 
 
-def test_a_failing_call_ahead_of_time_ends_its_thread_quietly():
+def test_a_failing_call_in_the_background_keeps_its_error_for_who_asks():
     def fails():
         raise RuntimeError("the stage's own call will raise this")
 
-    thread = ahead_of_time(fails)
-    thread.join(timeout=30)
-    assert not thread.is_alive()
+    future = in_background(fails)  # raises nothing here
+    assert isinstance(future.exception(timeout=30), RuntimeError)

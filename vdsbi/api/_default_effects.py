@@ -15,8 +15,7 @@ def default_effects(prob: Problem) -> tuple[tuple[str, str], ...]:
     (every real log has latency between the steer signal and the motion it causes: bus, sensor
     filters, the steering's own lag); and `steer_offset` where the car keeps a yaw rate at a
     logged steer of zero worth more than a tenth of the yaw rate's spread (`yaw_at_zero_steer`:
-    a steer sensor's zero, alignment or road crown; on a mild drive it is most of the misfit,
-    on a drive without it the share stays below 0.05).
+    a steer sensor's zero, alignment or road crown).
     """
     chosen = []
     used = grip_used(prob)

@@ -20,7 +20,7 @@ import numpy as np
 from ..diagnostics import Localisation, MisspecificationTest, locate_mismatch, misspecification_test
 from ..io import Recording, read_recording, read_vehicle
 from ..problem import Box, Problem, ProblemSettings, longitudinal_mode, make_problem
-from ..simulator import PARAM_NAMES, SpeedDriven, Vehicle, ahead_of_time, model_class
+from ..simulator import PARAM_NAMES, SpeedDriven, Vehicle, in_background, model_class
 from ._candidates import effect_space, label
 from ._data import compared_inputs, held_out_scores
 from ._fit import Fitter
@@ -130,10 +130,10 @@ def _fit_base(coarse: Fitter, fitter: Fitter, vehicle: Vehicle, s: DiagnoseSetti
     searched with the coarse step, then polished with the fine one."""
     # The fine step's programs compile on the other core while the coarse fits run; the polish
     # waits for them rather than compile them a second time.
-    compiling = ahead_of_time(fitter.fit, (), max_iter=1)
+    compiling = in_background(fitter.fit, (), max_iter=1)
     starts = [None, coarse.initial_z(typical_theta(vehicle))]
     base_c = min((s.fit(coarse, (), z, s.final_iters) for z in starts), key=lambda f: f.chi2)
-    compiling.join()
+    compiling.result()  # compiled (or raised) before the polish calls it: never compiled twice
     base = s.fit(fitter, (), base_c.z, max(4, s.final_iters // 2))
     say(f"base fit: χ²/dof {base.chi2_dof:.3f} ({base.iterations} it, {say.seconds:.0f} s)")
     return base_c, base
@@ -328,7 +328,7 @@ def _find(windows: Problem, vehicle: Vehicle, s: DiagnoseSettings, names: tuple[
     coarse, fitter = _fitters(windows, s)
     fitted = fitter.problem
     base_c, base = _fit_base(coarse, fitter, vehicle, s, say)
-    ahead_of_time(fitter.predict, base.z, (), windows)  # the held-out comparison's, during the search
+    in_background(fitter.predict, base.z, (), windows)  # the held-out comparison's, during the search
     before = _check(base, fitted, s.seed, s)
     loc, detected = _locate(before, fitted, s, say)
     search = _search(coarse, base_c, names, s, say)

@@ -1,6 +1,5 @@
 """Training loop: one jitted step, AdamW + clipping, validation split, early stopping."""
 
-import concurrent.futures
 import functools
 import math
 from collections.abc import Callable
@@ -12,6 +11,7 @@ import numpy as np
 import optax
 from jaxtyping import PRNGKeyArray
 
+from ..simulator import in_background
 from ._config import TrainingSettings
 from ._flow import ConditionalFlow
 from ._loss import AbstractLoss
@@ -150,14 +150,6 @@ def eval_steps(flow: ConditionalFlow, batches, key: PRNGKeyArray, loss: Abstract
 
     values = jax.lax.map(one, (batches, live))
     return jnp.sum(jnp.where(live, values, 0.0)) / jnp.maximum(jnp.sum(live), 1)
-
-
-def _in_background(fn: Callable, *args) -> concurrent.futures.Future:
-    """``fn(*args)`` on a short-lived worker thread."""
-    pool = concurrent.futures.ThreadPoolExecutor(1)
-    future = pool.submit(fn, *args)
-    pool.shutdown(wait=False)
-    return future
 
 
 def init_opt_state(flow: ConditionalFlow, optimizer):
@@ -332,7 +324,7 @@ def fit(
     val_batches = _validation_blocks(data, va, vsz, steps_per_call, mesh)
     # The validation loop compiles on a second thread while the first training block
     # compiles (XLA compiles without holding the GIL); its value, the initial loss, is unused.
-    warm = _in_background(eval_steps, state[0], val_batches[0][0], val_key, loss, val_batches[0][1])
+    warm = in_background(eval_steps, state[0], val_batches[0][0], val_key, loss, val_batches[0][1])
     epoch_args = (data, tr, bsz, steps_per_call, mesh, loss, optimizer, decay)  # fixed over epochs
     stopping = _EarlyStopping(state[0], training.patience)
     for epoch in range(training.max_epochs):

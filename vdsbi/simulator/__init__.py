@@ -28,7 +28,7 @@ from ._profiles import (
     seed_profile as seed_profile,
 )
 from ._programs import (
-    ahead_of_time as ahead_of_time,
+    in_background as in_background,
     memory_map_usage as memory_map_usage,
     release_compiled_programs as release_compiled_programs,
     thread_map as thread_map,

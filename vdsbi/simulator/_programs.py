@@ -11,7 +11,7 @@ compilation dies with a segmentation fault or an abort, which nothing in Python 
 a fraction of the limit; they are recompiled when next needed.
 
 XLA compiles one program on one core, and a stage that simulates one trajectory at a time keeps
-about one core busy: `ahead_of_time` runs a small call of a later stage in a second thread, so
+about one core busy: `in_background` runs a small call of a later stage in a second thread, so
 the programs that stage needs are compiled (and cached by their functions) by the time it runs,
 and `thread_map` runs independent calls of such a stage side by side.
 """
@@ -19,9 +19,8 @@ and `thread_map` runs independent calls of such a stage side by side.
 from __future__ import annotations
 
 import gc
-import threading
 from collections.abc import Callable, Iterable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import jax
@@ -53,26 +52,29 @@ def release_compiled_programs(fraction: float = 0.5) -> bool:
     return True
 
 
-def ahead_of_time(fn: Callable, /, *args, **kwargs) -> threading.Thread:
-    """Call ``fn(*args, **kwargs)`` in a new thread, under the caller's float64 setting, and
-    discard what it returns: the jitted functions it calls compile their programs for these
-    argument shapes, and a later call of the same shapes in any thread finds them compiled.
+def _under_callers_x64(fn: Callable) -> Callable:
+    """`fn` to be called on another thread under this thread's float64 setting (it is per thread)."""
+    x64 = bool(jax.config.jax_enable_x64)
 
-    Make it a cheap call (one iteration, one draw): it shares the cores with the work this
-    thread goes on with. The thread is joined at interpreter exit, not killed mid-compilation.
-    """
-    x64 = bool(jax.config.jax_enable_x64)  # the setting is per thread
-
-    def run():
+    def run(*args, **kwargs):
         with jax.enable_x64(x64):
-            try:
-                fn(*args, **kwargs)
-            except Exception:  # noqa: BLE001 — the stage's own call compiles, and raises, itself
-                pass
+            return fn(*args, **kwargs)
 
-    thread = threading.Thread(target=run, name=f"ahead-of-time {getattr(fn, '__name__', fn)}")
-    thread.start()
-    return thread
+    return run
+
+
+def in_background(fn: Callable, /, *args, **kwargs) -> Future:
+    """``fn(*args, **kwargs)`` on a short-lived worker thread under the caller's float64 setting.
+
+    Run for its compilations, it makes the jitted functions it calls compile their programs for
+    these shapes, which a later call of the same shapes in any thread then finds. Make it a cheap
+    call (one iteration, one draw): it shares the cores with the work this thread goes on with.
+    ``result()`` waits for it (and raises what it raised); a future nobody asks keeps its error.
+    """
+    pool = ThreadPoolExecutor(1)
+    future = pool.submit(_under_callers_x64(fn), *args, **kwargs)
+    pool.shutdown(wait=False)
+    return future
 
 
 def thread_map(fn: Callable, items: Iterable, workers: int = 2) -> list:
@@ -82,11 +84,5 @@ def thread_map(fn: Callable, items: Iterable, workers: int = 2) -> list:
     items = list(items)
     if workers <= 1 or len(items) <= 1:
         return [fn(x) for x in items]
-    x64 = bool(jax.config.jax_enable_x64)
-
-    def run(x):
-        with jax.enable_x64(x64):
-            return fn(x)
-
     with ThreadPoolExecutor(min(workers, len(items))) as pool:
-        return list(pool.map(run, items))
+        return list(pool.map(_under_callers_x64(fn), items))
