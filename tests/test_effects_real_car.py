@@ -111,6 +111,25 @@ def test_signal_delay_shifts_the_responses(setup):
         assert np.abs(g - b).max() > 5 * err, ch  # and the shift is not nothing
 
 
+def test_signal_delay_is_continuous_down_to_zero(setup):
+    """Below the Padé floor a delay still shifts the responses by about d, and d → 0 is the base
+    model: a fit can reach a car without latency."""
+    model, theta = setup
+    inputs = _inputs()
+    base, _ = _run(make_model(VEHICLE), theta, inputs, ())
+    base = np.asarray(base)
+    t = np.arange(base.shape[0]) / RATE
+    tiny, _ = _run(model, theta, inputs, _params({"signal_delay": {"delay": 1e-7}}))
+    np.testing.assert_allclose(np.asarray(tiny), base, rtol=0, atol=1e-6 * np.abs(base).max())
+    d = 0.004
+    got, _ = _run(model, theta, inputs, _params({"signal_delay": {"delay": d}}))
+    for ch in ("ay", "yaw_rate"):
+        b, g = base[:, I[ch]], np.asarray(got)[:, I[ch]]
+        shifted = np.interp(t - d, t, b)
+        err = np.abs(g - shifted)[100:].max()
+        assert err < 0.2 * np.abs(g - b)[100:].max(), ch
+
+
 def test_sensor_scale_scales_only_the_imu(setup):
     model, theta = setup
     inputs = _inputs()

@@ -2,7 +2,8 @@ import jax.numpy as jnp
 
 from ._base import AbstractEffect
 
-#: Smallest delay used, s: the Padé poles sit at |λ| = √12/d, so RK4 at 5 ms is stable above it.
+#: Smallest delay the Padé poles are placed for, s: they sit at |λ| = √12/d, so RK4 at 5 ms is
+#: stable above it.
 DELAY_FLOOR = 0.008
 
 
@@ -19,6 +20,10 @@ class SignalDelay(AbstractEffect):
     with two states per input, x1 = a0/(s² + a1·s + a0)·u and x2 = x1' (a0 = 12/d², a1 = 6/d):
     x2' = a0·(u − x1) − a1·x2 and u_d = u − d·x2. Its phase matches the delay's within 1° up
     to ω·d ≈ 1.6 (2.5 Hz at d = 0.1 s), ample for driver inputs.
+
+    Below `DELAY_FLOOR` the poles stay at the floor's and only the gain d scales:
+    u_d = u − d·x2 ≈ u − d·u' ≈ u(t − d) for driver inputs, continuous down to d = 0 (the base
+    model), so a fit can reach a car without latency.
     """
 
     name = "signal_delay"
@@ -48,5 +53,4 @@ class SignalDelay(AbstractEffect):
 
     def inputs(self, p, z, u):
         # (s² − a1·s + a0)/(s² + a1·s + a0) = 1 − 2·a1·s/(s² + a1·s + a0) and 2·a1/a0 = d.
-        d = jnp.maximum(jnp.abs(p[0]), DELAY_FLOOR)
-        return jnp.where(p[0] == 0, u, u - d * z[3:])
+        return jnp.where(p[0] == 0, u, u - jnp.abs(p[0]) * z[3:])
