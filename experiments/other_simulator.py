@@ -2,14 +2,16 @@
 
     python experiments/other_simulator.py [--quick]
 
-The other simulator is `linear_baseline`'s linear single-track model (numpy, nothing of vdsbi's):
-linear tyres, a yaw inertia that is not m·l_f·l_r, the car responding `lag` s after the logged
-steer, white sensor noise on a_y, yaw rate, speed and steer, sampled at `rate` Hz, no wheel speeds
-and no torques. Each `CASES` drive (90 s: a smooth random steer, the speed swinging between 12
-and 22 m/s) goes through `real_drives.run_one`: vdsbi's default `identify` on the first 70 %,
+The other simulator is `linear_baseline`'s single-track model (numpy, nothing of vdsbi's): linear
+tyres, or for a race car magic-formula tyres cornering at up to ~1.4 g (`RACE_CAR`: 250 Hz); a yaw
+inertia that is not m·l_f·l_r, the car responding `lag` s after the logged steer, white sensor
+noise on a_y, yaw rate, speed and steer, sampled at `rate` Hz, no wheel speeds and no torques.
+Each `CASES` drive (90 s: a smooth random steer, the speed swinging between 12 and 22 m/s; the
+race car's steer scaled to its speed for a lateral acceleration near the grip, between 13 and
+31 m/s) goes through `real_drives.run_one`: vdsbi's default `identify` on the first 70 %,
 held-out NRMSE of yaw rate and a_y on the rest against the least-squares fit of the linear model
-(here the true model class, with the true l_f and I_z: without a delay, with the steer delay its
-training cost picks, and at the true lag), the 90 % band's coverage, and each truth (l_f, C_αf,
+(the linear cars' own model class, with the true l_f and I_z: without a delay, with the steer
+delay its training cost picks, and at the true lag), the 90 % band's coverage, and each truth (l_f, C_αf,
 C_αr, the lag, the yaw-inertia index) against its 95 % interval (held, or flagged as not
 identified or as moved by model error).
 
@@ -32,7 +34,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import linear_baseline  # noqa: E402
 import real_drives  # noqa: E402
 
-#: name -> (rate Hz, steer lag s, car, C_αf, C_αr N/rad per axle, seed).
+#: name -> (rate Hz, steer lag s, car, C_αf, C_αr N/rad per axle, seed); `RACE_CAR`'s tyres are
+#: magic-formula curves with these cornering stiffnesses.
 CASES = {
     "linear car @ 50 Hz, 0.1 s lag": (
         50.0,
@@ -59,23 +62,74 @@ CASES = {
         5,
     ),
 }
+RACE_CAR = "race car @ 250 Hz, magic-formula tyres, 1.4 g"
+CASES[RACE_CAR] = (250.0, 0.0, linear_baseline.Car(850.0, 1.25, 1.8, 1100.0), 110e3, 150e3, 7)
 NOISE = {"ay": 0.15, "yaw_rate": 0.004, "vx": 0.05, "steer": 0.0005}
+#: The race car's tyres: F = D·sin(C·atan(Bα − E(Bα − atan Bα))), D = μ·F_z, B·C·D = C_α.
+MAGIC = {"mu": 1.6, "C": 1.35, "E": -0.5}
+
+
+def magic_formula_drive(car, cf: float, cr: float, t, vx, delta):
+    """(yaw rate, a_y) of the single-track car on magic-formula tyres (static axle loads), RK4 at
+    the sample interval."""
+    g, L = 9.81, car.a + car.b
+    fz = (car.mass * g * car.b / L, car.mass * g * car.a / L)
+
+    def tyre(alpha, cs, load):
+        d = MAGIC["mu"] * load
+        x = cs / (MAGIC["C"] * d) * alpha
+        return d * np.sin(MAGIC["C"] * np.arctan(x - MAGIC["E"] * (x - np.arctan(x))))
+
+    def rhs(y, v, dk):
+        fyf = tyre(dk - (y[0] + car.a * y[1]) / v, cf, fz[0])
+        fyr = tyre(-(y[0] - car.b * y[1]) / v, cr, fz[1])
+        return np.array([(fyf + fyr) / car.mass - v * y[1], (car.a * fyf - car.b * fyr) / car.iz]), (
+            fyf + fyr
+        ) / car.mass
+
+    dt, y = float(t[1] - t[0]), np.zeros(2)
+    r, ay = np.empty(len(t)), np.empty(len(t))
+    for k in range(len(t)):
+        k1, ay[k] = rhs(y, vx[k], delta[k])
+        r[k] = y[1]
+        k2 = rhs(y + 0.5 * dt * k1, vx[k], delta[k])[0]
+        k3 = rhs(y + 0.5 * dt * k2, vx[k], delta[k])[0]
+        k4 = rhs(y + dt * k3, vx[k], delta[k])[0]
+        y = y + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return r, ay
 
 
 def write_drive(
-    folder: Path, rate: float, lag: float, car, cf: float, cr: float, seed: int, duration: float
+    folder: Path,
+    rate: float,
+    lag: float,
+    car,
+    cf: float,
+    cr: float,
+    seed: int,
+    duration: float,
+    race: bool = False,
 ) -> dict[str, float]:
-    """recording.csv, vehicle.json and reference.json (the truth) of one drive in `folder`; the truth."""
+    """recording.csv, vehicle.json and reference.json (the truth) of one drive in `folder`; the
+    truth. `race`: magic-formula tyres, the steer scaled to the speed for ~1.4 g."""
     import pandas as pd
 
     t = np.arange(0.0, duration, 1.0 / rate)
     rng = np.random.default_rng(seed)
-    freq, phase, amp = rng.uniform(0.05, 0.5, 8), rng.uniform(0, 2 * np.pi, 8), rng.uniform(0.3, 1.0, 8)
-    steer = lambda s: 0.012 * np.sum(amp * np.sin(2 * np.pi * freq * s[:, None] + phase), axis=1)
-    vx = 17.0 + 5.0 * np.sin(2 * np.pi * t / 45.0)
-    # The car responds to the steer `lag` s after it is logged; integrated at 200 Hz, then sampled.
-    fine = np.arange(0.0, duration, 0.005)
-    r, ay = linear_baseline.simulate(car, cf, cr, fine, np.interp(fine, t, vx), steer(fine - lag), 0.0)
+    # The car responds to the steer `lag` s after it is logged; integrated finely, then sampled.
+    fine = np.arange(0.0, duration, 0.002 if race else 0.005)
+    if race:
+        freq, phase, amp = rng.uniform(0.05, 0.35, 6), rng.uniform(0, 2 * np.pi, 6), rng.uniform(0.4, 1, 6)
+        speed = lambda s: 22.0 + 7.0 * np.sin(2 * np.pi * s / 23.0) + 2.0 * np.sin(2 * np.pi * s / 7.1)
+        shape = lambda s: np.tanh(1.5 * np.sum(amp * np.sin(2 * np.pi * freq * s[:, None] + phase), axis=1))
+        steer = lambda s: 16.5 * (car.a + car.b) * shape(s) / speed(s) ** 2
+        vx = speed(t)
+        r, ay = magic_formula_drive(car, cf, cr, fine, speed(fine), steer(fine - lag))
+    else:
+        freq, phase, amp = rng.uniform(0.05, 0.5, 8), rng.uniform(0, 2 * np.pi, 8), rng.uniform(0.3, 1.0, 8)
+        steer = lambda s: 0.012 * np.sum(amp * np.sin(2 * np.pi * freq * s[:, None] + phase), axis=1)
+        vx = 17.0 + 5.0 * np.sin(2 * np.pi * t / 45.0)
+        r, ay = linear_baseline.simulate(car, cf, cr, fine, np.interp(fine, t, vx), steer(fine - lag), 0.0)
     cols = {
         "t": t,
         "steer": steer(t) + rng.normal(0, NOISE["steer"], t.size),
@@ -124,10 +178,11 @@ def markdown(rows: list[dict]) -> str:
     f = lambda d, c: "–" if not d or c not in d else f"{d[c]:.3f}"
     pct = lambda v: "–" if v is None else f"{v:.0%}"
     L = [
-        "# Drives from another simulator (a linear single-track model): vdsbi identify (defaults) on "
+        "# Drives from another simulator (a single-track model, linear or magic-formula tyres): vdsbi "
+        "identify (defaults) on "
         "the first 70 %, scored on the rest and against the truth",
         "",
-        "| drive | held-out NRMSE yaw rate / a_y: vdsbi estimate | LS fit (true model class) | "
+        "| drive | held-out NRMSE yaw rate / a_y: vdsbi estimate | LS fit (linear tyres, true l_f, I_z) | "
         "LS fit + steer delay | LS fit at the true lag | inside 90 % band (yaw rate / a_y) | "
         "truth inside 95 % interval (else flagged) | "
         "identify wall s |",
@@ -176,7 +231,8 @@ def main(argv=None) -> int:
             real=Path(tmp), rounds=1 if args.quick else 2, sims=300 if args.quick else 1000
         )
         for k, (name, (rate, lag, car, cf, cr, seed)) in enumerate(cases.items()):
-            truth = write_drive(Path(tmp) / name, rate, lag, car, cf, cr, seed, duration)
+            race = name == RACE_CAR
+            truth = write_drive(Path(tmp) / name, rate, lag, car, cf, cr, seed, duration, race)
             row = real_drives.run_one(name, settings, Path(tmp) / f"runs{k}", true_delay=lag)
             rows.append(row | {"truth": truth, "truth_check": truth_check(row, truth)})
     real_drives.write_rows("other_simulator" + ("_quick" if args.quick else ""), rows, markdown)
