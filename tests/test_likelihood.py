@@ -250,3 +250,28 @@ def test_prediction_draws_from_the_information_and_the_intervals_from_the_widene
         (post.sample(getkey(), 20000), 6.0 * info),
     ):
         np.testing.assert_allclose(np.cov(np.asarray(to_z(draws)).T), cov, rtol=0.1, atol=2e-3)
+
+
+def test_the_screen_keeps_a_quadratic_posterior_and_cuts_draws_past_a_wall(x64, getkey):
+    # A well-specified drive: the cost is as quadratic as the fit assumed, so nearly every draw
+    # stays. The same posterior told its cost is nearly flat (as a wall looks from the fit, e.g. a
+    # high CoG that spins a hard-cornering car) with a 10× wider Gaussian: the screen keeps only
+    # the draws the likelihood allows, about as spread as the real posterior.
+    import equinox as eqx
+
+    from vdsbi.diagnostics import screened_sample
+
+    veh = default_vehicle()
+    settings = ProblemSettings(longitudinal="torque", max_window=6.0, channels=("ay", "yaw_rate"))
+    prob = make_problem(_drive(), veh, settings)
+    box = Box.from_dict(prior_box(veh), PARAM_NAMES)
+    post = fit_likelihood(prob, THETA, box, free=("C_alpha_f", "C_alpha_r"), reweights=1, max_steps=20)
+    draws, kept = screened_sample(getkey(), post, prob, 256)
+    assert draws.shape == (256, len(PARAM_NAMES)) and kept > 0.9, kept
+    i = PARAM_NAMES.index("C_alpha_f")
+    spread = np.asarray(post.sample(getkey(), 4000))[:, i].std()
+    flat = eqx.tree_at(lambda p: (p.cov_z, p.curvature), post, (100 * post.cov_z, 1e-6 * post.curvature))
+    wide = np.asarray(flat.sample(getkey(), 4000))[:, i].std()
+    draws, kept = screened_sample(getkey(), flat, prob, 256)
+    assert wide > 5 * spread and kept < 0.5
+    assert draws[:, i].std() < 2 * spread

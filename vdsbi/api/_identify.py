@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ..diagnostics import fit_likelihood
+from ..diagnostics import fit_likelihood, screened_sample
 from ..io import InputError, SimulationError
 from ..problem import (
     Box,
@@ -184,17 +184,19 @@ def _result(
     import jax
 
     k_val, k_post, k_band = keys
-    samples = np.asarray(fit.sample(k_post, num_samples), float)
+    samples, kept = screened_sample(k_post, fit, full, num_samples, effects)
     summary = run_summary(full, samples, fit, state, run_info, box, effects, vehicle)
+    summary["likelihood_screen"] = {"kept_share": round(kept, 4)}
     summary["vehicle"] = vehicle.to_dict()  # the constants `vdsbi export` needs beside θ
     summary["npe_check"] = npe_check(npe_samples, checked)
     summary["validation"] = validation_report(prob, checked, npe_samples, effects, compare)
-    draws = np.asarray(checked.predictive_draws(k_val, ppc_draws))
+    draws, _ = screened_sample(k_val, checked, prob, ppc_draws, effects, information_only=True)
     band = predictive_band(k_band, prob, draws, checked.noise.scale, effects)
     summary["ppc"] = ppc_summary(prob, band)
     summary["warnings"] = run_warnings(samples, summary, box, names, longitudinal)
     # Its own key: the exported draws are not the validation band's draws of another fit.
-    predictive = np.asarray(fit.predictive_draws(jax.random.fold_in(k_val, 1), ppc_draws), float)
+    k_pred = jax.random.fold_in(k_val, 1)
+    predictive, _ = screened_sample(k_pred, fit, full, ppc_draws, effects, information_only=True)
     return IdentifyResult(estimator, samples, summary, out, full, band, prob, predictive)
 
 

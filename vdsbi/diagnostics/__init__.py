@@ -41,6 +41,7 @@ from ._likelihood import (
     NoiseModel as NoiseModel,
     fit_likelihood as fit_likelihood,
 )
+from ._likelihood_screen import screened_sample as screened_sample
 from ._maneuver import Limits as Limits, Maneuver as Maneuver
 from ._misspecification import (
     Localisation as Localisation,

@@ -119,6 +119,9 @@ class LikelihoodPosterior(eqx.Module):
             (`consistent_covariance`): the data's information was divided by "scale"; None when they can.
         v0_offset: (W,) start-speed corrections fitted per window, m/s (zeros where the problem
             follows the measured speed, or a window holds no fitted sample).
+        curvature: (k, k) Gauss–Newton curvature of the fit's cost in the free coordinates, start
+            speeds held at their fit: the quadratic model `screened_sample` holds draws against.
+        part: the problem's part that was fitted ("train" or "valid").
     """
 
     box: Box
@@ -132,6 +135,8 @@ class LikelihoodPosterior(eqx.Module):
     disagreement: dict = eqx.field(default_factory=dict)
     inconsistency: dict | None = None
     v0_offset: np.ndarray | None = None
+    curvature: np.ndarray | None = None
+    part: str = eqx.field(static=True, default="train")
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -145,11 +150,14 @@ class LikelihoodPosterior(eqx.Module):
     def sample(self, key: PRNGKeyArray, n: int, *, information_only: bool = False) -> Float[Array, "n P"]:
         """`n` draws in parameter units (Gaussian in z, mapped into the box); with
         `information_only`, from `cov_information` (for the identifiability rule)."""
+        return jax.vmap(self.box.from_unbounded)(self.sample_z(key, n, information_only=information_only))
+
+    def sample_z(self, key: PRNGKeyArray, n: int, *, information_only: bool = False) -> Float[Array, "n P"]:
+        """`sample`'s draws in the logit coordinates."""
         cov = self.cov_information if information_only else self.cov_z
         chol = np.linalg.cholesky(cov + 1e-12 * np.eye(len(self.z)))
         eps = jax.random.normal(key, (n, len(self.z)), dtype=jnp.float32)
-        z = jnp.asarray(self.z, jnp.float32) + eps @ jnp.asarray(chol.T, jnp.float32)
-        return jax.vmap(self.box.from_unbounded)(z)
+        return jnp.asarray(self.z, jnp.float32) + eps @ jnp.asarray(chol.T, jnp.float32)
 
     def predictive_draws(self, key: PRNGKeyArray, n: int) -> Float[Array, "n P"]:
         """`n` parameter draws for predicting new driving: from the drive's information alone
@@ -255,7 +263,7 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
     k = len(idx)
     z, v0_offset = np.asarray(z[:k]), np.asarray(z[k:]) if n_v else np.zeros(len(data.v0))
     jac = np.asarray(res.jacobian).reshape(*mask.shape, len(scale), k + n_v) * (std / scale)[:, None]
-    cov_free, informed, shifts, joint = _covariances(data, mask, jac, resid / scale, z, tau)
+    cov_free, informed, shifts, joint, curvature = _covariances(data, mask, jac, resid / scale, z, tau)
     cov, cov_info = (np.diag(np.full(len(names), PRIOR_Z_STD**2)) for _ in range(2))
     cov[np.ix_(idx, idx)] = cov_free
     cov_info[np.ix_(idx, idx)] = informed
@@ -265,7 +273,7 @@ def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, 
     disagree = {free[i]: v for i, v in shifts.items()}
     steps = tuple(steps)
     return LikelihoodPosterior(
-        box, z_all, cov, cov_info, free, noise, converged, steps, disagree, joint, v0_offset
+        box, z_all, cov, cov_info, free, noise, converged, steps, disagree, joint, v0_offset, curvature, part
     )
 
 
@@ -273,10 +281,13 @@ def _covariances(data: Problem, mask, jac, r, z, tau):
     """The Laplace covariance of the free coordinates with the final noise model, the start
     speeds marginalised, then widened by the model error (`robust_covariance`, then
     `consistent_covariance`); `jac` (W, K, C, k + start speeds) and `r` (W, K, C) whitened by the
-    residual's scale. Returns (widened, information-only, shifts, joint disagreement)."""
+    residual's scale. Returns (widened, information-only, shifts, joint disagreement, the
+    curvature with the start speeds held)."""
     k = len(z)
     jac, jac_v = jac[..., :k], own_columns(jac[..., k:])
     root_tau = np.sqrt(tau)
+    held = (jac / root_tau[:, None]).reshape(-1, k)
+    curvature = held.T @ held + np.diag(np.full(k, PRIOR_Z_STD**-2))
     jac_tau = profiled(jac / root_tau[:, None], jac_v / root_tau)
     jac = profiled(jac, jac_v)
     prec = np.full(k, PRIOR_Z_STD**-2)
@@ -284,7 +295,7 @@ def _covariances(data: Problem, mask, jac, r, z, tau):
     informed = robust_covariance(cov, jac, r, mask, prec, BLOCK_TAUS * float(tau.max()))
     splits = data_splits(data, mask)
     widened, shifts, joint = consistent_covariance(informed, jac_tau, r / root_tau, z, prec, splits)
-    return widened, informed, shifts, joint
+    return widened, informed, shifts, joint, curvature
 
 
 #: Step, in logit coordinates, of the test for which parameters the channels depend on.

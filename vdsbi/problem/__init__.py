@@ -28,6 +28,7 @@ from ._problem import (
     yaw_at_zero_steer as yaw_at_zero_steer,
 )
 from ._simulate import (
+    CLEAN_BATCH as CLEAN_BATCH,
     WindowedModel as WindowedModel,
     simulate_draws as simulate_draws,
     windowed_model as windowed_model,
