@@ -184,9 +184,8 @@ def _result(
     import jax
 
     k_val, k_post, k_band = keys
-    samples, kept = screened_sample(k_post, fit, full, num_samples, effects)
+    samples = np.asarray(fit.sample(k_post, num_samples), float)
     summary = run_summary(full, samples, fit, state, run_info, box, effects, vehicle)
-    summary["likelihood_screen"] = {"kept_share": round(kept, 4)}
     summary["vehicle"] = vehicle.to_dict()  # the constants `vdsbi export` needs beside θ
     summary["npe_check"] = npe_check(npe_samples, checked)
     summary["validation"] = validation_report(prob, checked, npe_samples, effects, compare)
@@ -196,7 +195,8 @@ def _result(
     summary["warnings"] = run_warnings(samples, summary, box, names, longitudinal)
     # Its own key: the exported draws are not the validation band's draws of another fit.
     k_pred = jax.random.fold_in(k_val, 1)
-    predictive, _ = screened_sample(k_pred, fit, full, ppc_draws, effects, information_only=True)
+    predictive, kept = screened_sample(k_pred, fit, full, ppc_draws, effects, information_only=True)
+    summary["likelihood_screen"] = {"kept_share": round(kept, 4)}
     return IdentifyResult(estimator, samples, summary, out, full, band, prob, predictive)
 
 
