@@ -146,6 +146,10 @@ def test_export_autoware_keys_as_the_mpc_lateral_controller_reads_them(effect_ru
     post = json.loads((effect_run / "posterior.json").read_text())
     for n in ("l_f", "C_alpha_f", "C_alpha_r"):
         post["parameters"][n]["identified"] = True
+    # What the drive says about the steer signal travels as comments.
+    like = post["parameters"]["l_f"]
+    post["parameters"]["signal_delay.delay"] = like | {"estimate": 0.123, "q05": 0.1, "q95": 0.15}
+    post["parameters"]["steer_offset.offset"] = like | {"estimate": -0.00123, "q05": -0.002, "q95": 0.0}
     run = tmp_path / "run"
     run.mkdir()
     (run / "posterior.json").write_text(json.dumps(post))
@@ -165,6 +169,8 @@ def test_export_autoware_keys_as_the_mpc_lateral_controller_reads_them(effect_ru
     # Autoware's DynamicsBicycleModel: l_f = L (1 - m_front / m) gives back our l_f.
     assert veh.wheelbase * (1 - front / veh.mass) == pytest.approx(p["l_f"]["estimate"], abs=1e-4)
     assert post["recording"] in text and "90 %" in text and "sensor_bias" in text
+    assert "delay = 0.123 [0.100, 0.150] s" in text and "input_delay" in text
+    assert "offset = -0.00123 [-0.00200, 0.00000] rad" in text
 
 
 def test_export_refuses_a_parameter_the_drive_did_not_identify(effect_run, tmp_path, capsys):

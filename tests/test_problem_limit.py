@@ -38,7 +38,7 @@ def test_make_problem_cuts_the_slide_out_and_says_why():
     assert all(w.t1 <= 19.1 or w.t0 >= 22.4 for w in prob.windows)
     reasons = [r[2] for r in prob.description["rejected"]]
     assert any(r.startswith("limit handling") for r in reasons)
-    keep = ProblemSettings(longitudinal="speed", max_window=5.0, limit_handling="keep")
+    keep = ProblemSettings(longitudinal="speed", max_window=5.0, exclude_slides=False)
     kept = make_problem(rec, veh, keep)
     assert any(w.t0 < 20.3 < w.t1 for w in kept.windows)
 

@@ -136,6 +136,7 @@ def autoware(post: Mapping[str, Any], vehicle: Mapping[str, Any] | None, run_dir
         f"#   mass_rl = mass_rr = m*l_f/(2L) = {rear} kg [{hi['mass_rl']:.1f}, {lo['mass_rl']:.1f}]",
         "#   (Autoware derives l_f = L*(1 - (mass_fl + mass_fr)/m) from these: the value above.)",
     ]
+    head += _steering_notes(params)
     head += [f"# WARNING: {w['message']}" for w in post.get("warnings", [])]
     body = [
         "/**:",
@@ -147,6 +148,26 @@ def autoware(post: Mapping[str, Any], vehicle: Mapping[str, Any] | None, run_dir
         f"      cr: {_value(car):.3f}",
     ]
     return "\n".join(head + body) + "\n"
+
+
+def _steering_notes(params: Mapping[str, Any]) -> list[str]:
+    """Comments for what the run found about the steer signal and Autoware has no key for: its
+    `input_delay` is the command → actuator delay and its steering offset is estimated online, so
+    neither is the logged-steer → response delay or offset vdsbi measures."""
+    notes = []
+    if "signal_delay.delay" in params:
+        d = params["signal_delay.delay"]
+        notes += [
+            f"#   logged steer -> response delay = {_interval(d, '.3f')} s (signal_delay): if the",
+            "#   logged steer is the commanded angle, this is Autoware's input_delay.",
+        ]
+    if "steer_offset.offset" in params:
+        o = params["steer_offset.offset"]
+        notes += [
+            f"#   steer zero offset = {_interval(o, '.5f')} rad (acting = logged + offset; Autoware",
+            "#   removes an offset online: steering_offset.enable_auto_steering_offset_removal).",
+        ]
+    return notes
 
 
 def _value(p: Mapping[str, Any]) -> float:

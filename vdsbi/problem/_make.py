@@ -278,7 +278,7 @@ def _torque_warning(
 
 
 def _limit_stretches(rec: Recording, vehicle: Vehicle, settings: ProblemSettings):
-    if settings.limit_handling == "keep":
+    if not settings.exclude_slides:
         return []
     return slides(rec, wheel_radius=vehicle.wheel_radius, friction=vehicle.friction)
 

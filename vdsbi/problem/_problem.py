@@ -50,8 +50,8 @@ class ProblemSettings:
         channels: channels to condition on (default: every measured channel the mode allows).
         quiet_edges: start windows at the quietest nearby moment (near straight running), where
             the steady-state initial lateral state is accurate.
-        limit_handling: "exclude" (default) cuts slides caught by counter-steer out of the
-            driving, with margins and a stated reason (`slides`); "keep" keeps them.
+        exclude_slides: cut slides caught by counter-steer out of the driving, with margins and
+            a stated reason (`slides`); False keeps them.
     """
 
     longitudinal: str = "auto"
@@ -65,11 +65,9 @@ class ProblemSettings:
     segment: tuple[float, float] | None = None
     channels: tuple[str, ...] | None = None
     quiet_edges: bool = True
-    limit_handling: str = "exclude"
+    exclude_slides: bool = True
 
     def __post_init__(self):
-        if self.limit_handling not in ("exclude", "keep"):
-            raise ValueError(f"limit_handling must be 'exclude' or 'keep', got {self.limit_handling!r}")
         if self.longitudinal not in (*LONGITUDINAL_MODES, "auto"):
             raise ValueError(f"longitudinal must be 'torque', 'speed' or 'auto', got {self.longitudinal!r}")
         if not 0.0 <= self.held_out < 1.0:
