@@ -23,6 +23,7 @@ Writes experiments/results/real_drives{_quick}.json and .md.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -69,9 +70,11 @@ def reference(name: str, folder: Path | None = None) -> dict:
 
 
 def without_torques(rec, t0: float, t1: float):
+    """[t0, t1] s of `rec` without its torque columns (as most real logs come); the file's rate is
+    kept, so the noise is estimated as for the file."""
     part = rec.slice(t0, t1)
-    return build_recording(
-        {"t": part.t, "steer": part.steer, **part.channels}, f"{rec.source} [{t0:.1f}, {t1:.1f}] s"
+    return dataclasses.replace(
+        part, torque_front=None, torque_rear=None, source=f"{rec.source} [{t0:.1f}, {t1:.1f}] s"
     )
 
 

@@ -9,6 +9,7 @@ import pytest
 from vdsbi.io import (
     InputError,
     build_recording,
+    estimate_noise_std,
     find_segments,
     load_drive,
     read_recording,
@@ -182,9 +183,28 @@ def test_25_hz_and_1_khz_read_to_the_same_200_hz_channels(tmp_path):
     assert np.abs(np.asarray(a.accel) - np.asarray(b.accel)).max() < 1e-2
 
 
-def test_20_hz_is_accepted(tmp_path):
+def test_20_hz_is_accepted_and_10_hz_read_with_a_warning(tmp_path):
     drive_frame(20.0).to_csv(tmp_path / "r.csv", index=False, float_format="%.10g")
-    assert read_recording(tmp_path / "r.csv").original_rate == pytest.approx(20.0)
+    rec = read_recording(tmp_path / "r.csv")
+    assert rec.original_rate == pytest.approx(20.0) and not any("Hz" in w for w in rec.warnings)
+    drive_frame(10.0, 30.0).to_csv(tmp_path / "slow.csv", index=False, float_format="%.10g")
+    slow = read_recording(tmp_path / "slow.csv")
+    assert slow.original_rate == pytest.approx(10.0) and slow.rate == 200.0
+    assert any("10 Hz is below 20 Hz" in w for w in slow.warnings)
+
+
+@pytest.mark.parametrize("rate", [10.0, 25.0, 50.0])
+def test_noise_of_a_slow_log_is_its_model_rate_equivalent(rate):
+    # White noise σ on samples at `rate` has the low-frequency density of white noise
+    # σ·sqrt(200/rate) at the model rate; the estimate must say so (interpolation hides it).
+    rng = np.random.default_rng(int(rate))
+    frame = drive_frame(rate, 120.0)
+    sigma = {"ay": 0.1, "yaw_rate": 0.003}
+    for c, s in sigma.items():
+        frame[c] += rng.normal(0.0, s, len(frame))
+    est = estimate_noise_std(build_recording(dict(frame.items()), "slow.csv"))
+    for c, s in sigma.items():
+        assert est[c] == pytest.approx(s * np.sqrt(200.0 / rate), rel=0.2), c
 
 
 @pytest.mark.parametrize("name", ["vw_gti_low_speed", "vw_gti_high_speed_2"])

@@ -17,7 +17,7 @@ from ..simulator import CHANNELS, INPUTS
 from ._consistency import consistency_warnings
 from ._errors import InputError
 from ._recording import REQUIRED, SPEED_CHANNELS, TORQUES, Recording
-from ._resample import check_uniform, resample
+from ._resample import LOW_RATE, check_uniform, resample
 
 MIN_MEASURED = 2
 #: Shortest accepted recording, s: the slowest dynamics of interest (yaw, wheel spin-up) settle
@@ -131,6 +131,11 @@ def build_recording(
     data = _to_numeric(columns, names, source)
     t = data["t"]
     dt = _check_time(t, source)
+    if 1.0 / dt < LOW_RATE * (1.0 - 1e-6):
+        warnings.append(
+            f"{source}: t: sample rate {1.0 / dt:.3g} Hz is below {LOW_RATE:g} Hz: the body's "
+            "dynamics (1-3 Hz) are barely resolved; read and resampled, expect wide intervals"
+        )
     signals = {k: data[k] for k in names[1:]}
     _check_finite(signals, t, source)
     n_sustain = max(1, int(round(SUSTAIN_WINDOW / dt)))

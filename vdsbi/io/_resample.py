@@ -11,9 +11,11 @@ GRID_RTOL = 0.01
 #: ... or half a millisecond, so time stamps written with millisecond precision pass (capped at
 #: a quarter of dt, so one dropped sample, which shifts the grid by about dt/2, never passes).
 GRID_ATOL = 0.5e-3
-#: Below this rate the vehicle's dynamics (1–3 Hz) are not resolved; a lower rate usually means
-#: `t` is not in seconds (e.g. milliseconds).
-MIN_RATE = 20.0
+#: Below this rate `t` is not in seconds (a 100-Hz log stamped in milliseconds reads as 0.1 Hz):
+#: refused. Any rate above it is resampled, as the recording format asks.
+MIN_RATE = 2.0
+#: Below this rate the body's dynamics (1–3 Hz) are barely resolved: read, with a warning.
+LOW_RATE = 20.0
 
 
 def check_uniform(t: np.ndarray, source: str) -> float:
@@ -26,7 +28,7 @@ def check_uniform(t: np.ndarray, source: str) -> float:
     k = np.arange(n)
     dt, t0 = np.polyfit(k, t - t[0], 1)  # least-squares grid, so jitter at the ends does not tilt it
     t0 += t[0]
-    if not 1.0 / dt >= MIN_RATE * (1.0 - 1e-6):  # the fitted dt of exact 20-Hz stamps is ~1e-15 off
+    if not 1.0 / dt >= MIN_RATE * (1.0 - 1e-6):  # the fitted dt of exact stamps is ~1e-15 off
         raise InputError(
             source,
             "t",

@@ -335,6 +335,9 @@ def estimate_noise_std(
     std if over half the residuals are zero (quantised or held values). For white noise of std σ
     the residual has std σ·sqrt(1 - h0), with h0 the filter's centre weight; that is divided out.
     Everything the model does not describe above ~5 Hz (vibration, engine orders) counts as noise.
+    A recording logged below the model rate is estimated on its own samples (the linear
+    interpolation to the model rate smooths the noise away) and returned as the model-rate white
+    noise of the same low-frequency density: σ·sqrt(rate / original_rate).
 
     Args:
         rec: the recording.
@@ -346,23 +349,29 @@ def estimate_noise_std(
     """
     from scipy.signal import savgol_coeffs, savgol_filter
 
-    n = max(5, int(round(window * rec.rate)) | 1)
+    t, channels, rate, gain = rec.t, rec.channels, rec.rate, 1.0
+    if rec.original_rate < rec.rate * (1.0 - 1e-6):
+        # The resampled series is linear between the recorded samples: read back at their times.
+        rate, gain = rec.original_rate, float(np.sqrt(rec.rate / rec.original_rate))
+        t = np.arange(rec.t[0], rec.t[-1] + 1e-9, 1.0 / rate)
+        channels = {k: np.interp(t, rec.t, v) for k, v in rec.channels.items()}
+    n = max(5, int(round(window * rate)) | 1)
     h0 = float(savgol_coeffs(n, 3)[n // 2])
     if segments:
-        mask = np.zeros(rec.num_samples, dtype=bool)
+        mask = np.zeros(t.shape[0], dtype=bool)
         for a, b in segments:
-            mask |= (rec.t >= a) & (rec.t <= b)
+            mask |= (t >= a) & (t <= b)
     else:
-        mask = np.ones(rec.num_samples, dtype=bool)
+        mask = np.ones(t.shape[0], dtype=bool)
     # Drop the filter's edge samples around each stretch.
     edge = np.convolve(~mask, np.ones(n), mode="same") > 0
     use = mask & ~edge
     if use.sum() < n:
         use = mask
     out = {}
-    for name, x in rec.channels.items():
+    for name, x in channels.items():
         r = (x - savgol_filter(x, n, 3, mode="interp"))[use]
         mad = np.median(np.abs(r - np.median(r)))
         s = 1.4826 * mad if mad > 0 else float(np.std(r))
-        out[name] = float(s / np.sqrt(1.0 - h0))
+        out[name] = float(gain * s / np.sqrt(1.0 - h0))
     return out
