@@ -97,6 +97,24 @@ def test_noise_std_is_estimated(long_drive):
     assert all(prob.noise_source[c] == "estimated from the recording" for c in prob.channels)
 
 
+def test_a_slow_log_gets_the_same_model_rate_noise_from_the_vehicle_file_and_the_estimate(long_drive):
+    # The 200-Hz drive taken at 25 Hz with σ = 0.05 m/s² per sample on ay: the vehicle file's
+    # σ and the estimate both become the model-rate equivalent σ·sqrt(200/25).
+    rec, vehicle = long_drive
+    rng = np.random.default_rng(1)
+    cols = {"t": rec.t[::8], "steer": rec.steer[::8], "torque_front": rec.torque_front[::8]}
+    cols |= {"torque_rear": rec.torque_rear[::8]}
+    cols |= {c: v[::8] for c, v in rec.channels.items()}
+    cols["ay"] = cols["ay"] + rng.normal(0.0, 0.05, len(cols["t"]))
+    slow = build_recording(cols, "slow.csv")
+    settings = ProblemSettings(max_window=5.0, bandwidth=None)
+    told = dataclasses.replace(vehicle, noise_std={"ay": 0.05})
+    for veh in (vehicle, told):
+        prob = make_problem(slow, veh, settings)
+        sigma = dict(zip(prob.channels, prob.sigma))
+        assert sigma["ay"] == pytest.approx(0.05 * np.sqrt(8.0), rel=0.2), prob.noise_source["ay"]
+
+
 def test_truth_predicts_every_window_even_mid_corner(x64, long_drive):
     # Windows start mid-corner: with the estimated initial lateral state, the truth predicts
     # each window (train and held-out) to the noise level; a window started laterally at rest

@@ -24,12 +24,15 @@ from ..simulator import Vehicle
 def raw_noise_std(
     rec: Recording, vehicle: Vehicle, channels: tuple[str, ...], segments
 ) -> tuple[np.ndarray, dict[str, str]]:
-    """σ per channel at the model rate: vehicle.json's noise_std where given, else estimated."""
+    """σ per channel at the model rate: vehicle.json's noise_std where given (a std per recorded
+    sample, so scaled to the model-rate white noise of the same density,
+    σ·sqrt(rate / original_rate)), else estimated."""
     est = None
     out, src = [], {}
+    gain = float(np.sqrt(rec.rate / rec.original_rate))
     for c in channels:
         if c in vehicle.noise_std and vehicle.noise_std[c] > 0:
-            out.append(float(vehicle.noise_std[c]))
+            out.append(gain * float(vehicle.noise_std[c]))
             src[c] = "vehicle file"
         else:
             if est is None:
