@@ -12,7 +12,9 @@ from vdsbi.problem import (
     lag1_autocorrelation,
     make_problem,
     predict,
+    simulate_draws,
     validate,
+    windowed_model,
     yaw_at_zero_steer,
 )
 from vdsbi.simulator import (
@@ -113,6 +115,24 @@ def test_a_slow_log_gets_the_same_model_rate_noise_from_the_vehicle_file_and_the
         prob = make_problem(slow, veh, settings)
         sigma = dict(zip(prob.channels, prob.sigma))
         assert sigma["ay"] == pytest.approx(0.05 * np.sqrt(8.0), rel=0.2), prob.noise_source["ay"]
+
+
+def test_draws_in_chunks_are_the_draws_of_one_call(long_drive):
+    import jax
+
+    rec, vehicle = long_drive
+    prob = make_problem(rec, vehicle, ProblemSettings(max_window=5.0))
+    wm = windowed_model(prob)
+    theta = np.asarray(THETA)[None] * np.linspace(0.9, 1.1, 7)[:, None]
+    key = jax.random.key(3)
+    for k in (None, key):
+        kw = dict(sigma_raw=prob.sigma_raw) if k is not None else {}
+        whole = simulate_draws(k, wm, theta, **kw)
+        parts = simulate_draws(k, wm, theta, max_batch=3, **kw)
+        np.testing.assert_array_equal(np.asarray(parts[1]), np.asarray(whole[1]))
+        # The same keys and θ; float32 results differ only as XLA vectorises another batch size.
+        scale = np.abs(np.asarray(whole[0])).max(axis=(0, 1, 2))
+        assert np.max(np.abs(np.asarray(parts[0]) - np.asarray(whole[0])) / scale) < 1e-3
 
 
 def test_truth_predicts_every_window_even_mid_corner(x64, long_drive):

@@ -124,6 +124,16 @@ def _clean_batch(wm, theta, effect_params):
 
 #: Noise-free batches of fewer draws are padded to this many.
 CLEAN_BATCH = 128
+#: Bytes of model-rate readings one batched call may hold, counting the copies the noise and
+#: the filter make (`_bytes_per_draw`); more draws are simulated in equal chunks. A 100-s drive's
+#: 1000 simulations fit in one call; a 10-min drive's then need a few, not 10 GB at once.
+BATCH_BYTES = 4 * 2**30
+
+
+def _bytes_per_draw(wm: WindowedModel) -> int:
+    # W·T readings of 6 states in float32, about four live copies of them (measured: a 60-window
+    # drive's 1000 draws peaked at 10 GB).
+    return 4 * 6 * 4 * int(wm.inputs.steer.size)
 
 
 def simulate_draws(
@@ -134,22 +144,50 @@ def simulate_draws(
     sigma_raw: Float[Array, " C"] | None = None,
     v0_jitter: float = 0.0,
     effect_params: tuple = (),
+    max_batch: int | None = None,
 ) -> tuple[Float[Array, "N W K C"], Bool[Array, " N"]]:
     """Many draws at once, vmapped and split over all devices along N (noise-free if `key` is
-    None). `effect_params` holds one (N, P_e) array per enabled effect. Failures are flagged."""
+    None). `effect_params` holds one (N, P_e) array per enabled effect. Failures are flagged.
+    More draws than `max_batch` (default: what `BATCH_BYTES` holds) go in equal chunks, with the
+    same draws as in one call."""
     theta = jnp.asarray(theta)
     n = theta.shape[0]
     effect_params = tuple(
         jnp.broadcast_to(jnp.asarray(p, theta.dtype), (n, len(e.param_names)))
         for e, p in zip(wm.model.effects, effect_params)
     )
-    if key is None:
-        # A few draws are padded to one batch size: the fit's checks, the validation and the
-        # predictive band then share one compiled program.
-        theta_s, ep_s = shard_draws((theta, effect_params), n, minimum=CLEAN_BATCH)
+    keys = None if key is None else jax.random.split(key, n)
+    most = max(1, BATCH_BYTES // _bytes_per_draw(wm)) if max_batch is None else int(max_batch)
+    if max(n, CLEAN_BATCH if key is None else 1) <= most:
+        minimum = CLEAN_BATCH if key is None else 1
+        return _simulate_batch(keys, wm, theta, sigma_raw, v0_jitter, effect_params, minimum)
+    parts = -(-n // most)
+    size = -(-n // parts)
+    outs = [
+        _simulate_batch(
+            None if keys is None else keys[i : i + size],
+            wm,
+            theta[i : i + size],
+            sigma_raw,
+            v0_jitter,
+            tuple(p[i : i + size] for p in effect_params),
+            size,
+        )
+        for i in range(0, n, size)
+    ]
+    return jnp.concatenate([o[0] for o in outs])[:n], jnp.concatenate([o[1] for o in outs])[:n]
+
+
+def _simulate_batch(keys, wm, theta, sigma_raw, v0_jitter, effect_params, minimum: int):
+    """One vmapped call over the draws, padded to `minimum` (noise-free ones to `CLEAN_BATCH`
+    unless chunked: the fit's checks, the validation and the predictive band then share one
+    compiled program; chunks to their common size)."""
+    n = theta.shape[0]
+    if keys is None:
+        theta_s, ep_s = shard_draws((theta, effect_params), n, minimum=minimum)
         ys, ok = _clean_batch(wm, theta_s, ep_s)
     else:
-        keys, theta_s, ep_s = shard_draws((jax.random.split(key, n), theta, effect_params), n)
+        keys_s, theta_s, ep_s = shard_draws((keys, theta, effect_params), n, minimum=minimum)
         sig = jnp.asarray(sigma_raw, theta.dtype)
-        ys, ok = _noisy_batch(wm, keys, theta_s, sig, jnp.asarray(v0_jitter, theta.dtype), ep_s)
+        ys, ok = _noisy_batch(wm, keys_s, theta_s, sig, jnp.asarray(v0_jitter, theta.dtype), ep_s)
     return ys[:n], ok[:n]
