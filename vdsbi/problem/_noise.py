@@ -29,7 +29,8 @@ def raw_noise_std(
     σ·sqrt(rate / original_rate)), else estimated."""
     est = None
     out, src = [], {}
-    gain = float(np.sqrt(rec.rate / rec.original_rate))
+    ratio = rec.rate / rec.original_rate
+    gain = 1.0 if abs(ratio - 1.0) < 1e-3 else float(np.sqrt(ratio))  # a file at the model rate: as given
     for c in channels:
         if c in vehicle.noise_std and vehicle.noise_std[c] > 0:
             out.append(gain * float(vehicle.noise_std[c]))
