@@ -27,7 +27,7 @@ from ._files import (
 )
 from ._parquet import read_parquet as read_parquet
 from ._recording import Recording as Recording, speed_slope as speed_slope
-from ._resample import running_mean as running_mean
+from ._resample import noise_gain as noise_gain, running_mean as running_mean
 from ._segments import (
     Segment as Segment,
     estimate_noise_std as estimate_noise_std,

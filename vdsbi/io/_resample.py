@@ -18,6 +18,13 @@ MIN_RATE = 2.0
 LOW_RATE = 20.0
 
 
+def noise_gain(original_rate: float, rate: float) -> float:
+    """The factor from a std per recorded sample to the model-rate white noise of the same
+    low-frequency density, sqrt(rate / original_rate); 1 for a file at the model rate."""
+    ratio = rate / original_rate
+    return 1.0 if abs(ratio - 1.0) < 1e-3 else float(np.sqrt(ratio))
+
+
 def check_uniform(t: np.ndarray, source: str) -> float:
     """Check that strictly increasing `t` (s) is uniform within tolerance; return dt (s).
 

@@ -10,6 +10,7 @@ import pandas as pd
 
 from ..simulator import GRAVITY
 from ._recording import Recording
+from ._resample import noise_gain
 from ._speed import forward_speed
 
 #: Wheel radius, m, used to turn wheel speeds into a speed when neither vx nor a radius is given.
@@ -349,12 +350,16 @@ def estimate_noise_std(
     """
     from scipy.signal import savgol_coeffs, savgol_filter
 
-    t, channels, rate, gain = rec.t, rec.channels, rec.rate, 1.0
-    if rec.original_rate < rec.rate * (1.0 - 1e-6):
-        # The resampled series is linear between the recorded samples: read back at their times.
-        rate, gain = rec.original_rate, float(np.sqrt(rec.rate / rec.original_rate))
+    t, channels, rate = rec.t, rec.channels, rec.rate
+    gain = noise_gain(rec.original_rate, rec.rate)
+    if gain > 1.0:
+        # Upsampled: the resampled series is linear between the recorded samples, so they are
+        # read back at their times.
+        rate = rec.original_rate
         t = np.arange(rec.t[0], rec.t[-1] + 1e-9, 1.0 / rate)
         channels = {k: np.interp(t, rec.t, v) for k, v in rec.channels.items()}
+    else:
+        gain = 1.0  # downsampled (box-averaged) or at the model rate: already the model rate's σ
     n = max(5, int(round(window * rate)) | 1)
     h0 = float(savgol_coeffs(n, 3)[n // 2])
     if segments:

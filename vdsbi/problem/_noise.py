@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..io import Recording, estimate_noise_std
+from ..io import Recording, estimate_noise_std, noise_gain
 from ..simulator import Vehicle
 
 
@@ -29,8 +29,7 @@ def raw_noise_std(
     σ·sqrt(rate / original_rate)), else estimated."""
     est = None
     out, src = [], {}
-    ratio = rec.rate / rec.original_rate
-    gain = 1.0 if abs(ratio - 1.0) < 1e-3 else float(np.sqrt(ratio))  # a file at the model rate: as given
+    gain = noise_gain(rec.original_rate, rec.rate)
     for c in channels:
         if c in vehicle.noise_std and vehicle.noise_std[c] > 0:
             out.append(gain * float(vehicle.noise_std[c]))
