@@ -4,6 +4,7 @@ output; good ones reach the library."""
 
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
 
@@ -66,3 +67,16 @@ def test_observability_with_effects_from_a_theta_file(tmp_path):
     rep = json.loads((out / "fisher.json").read_text())
     assert rep["effects"] == ["aero_drag"] and len(rep["params"]) > 6
     assert rep["maneuver"] == "seed profile, 1 s"
+
+
+def test_every_help_page_formats():
+    """`vdsbi --help` and each `vdsbi COMMAND --help` print (argparse %-formats help strings: a
+    bare "%" in one breaks them all)."""
+    from vdsbi.cli._main import build_parser
+
+    parser = build_parser()
+    assert "COMMAND" in parser.format_help()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    assert len(sub.choices) >= 5
+    for name, p in sub.choices.items():
+        assert name in p.format_help()

@@ -12,7 +12,7 @@ from ..io import InputError, write_atomically
 def add_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         "predict",
-        help="simulate another recording at an identify run's estimate (and its 90 % band)",
+        help="simulate another recording at an identify run's estimate (and its 90 %% band)",
         description="Simulate REC's usable driving window by window, each from its own measured "
         "state, at DIR's estimate with DIR's effects, as identify scores its held-out part; write "
         "the measured and predicted channels (and with --band the 90 % posterior-predictive band, "
