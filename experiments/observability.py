@@ -62,7 +62,8 @@ from vdsbi.simulator import (  # noqa: E402
     seed_profile,
 )
 
-RESULTS = Path(__file__).parent / "results"
+RESULTS = Path(__file__).resolve().parent / "results"
+ROOT = Path(__file__).resolve().parents[1]
 V0 = 10.5
 #: The seed paper's Table II posterior std, physical units (stiffness deviations × 1e5).
 SEED_PAPER_STD = {
@@ -465,10 +466,14 @@ def main():
             for n in PARAM_NAMES
             if n in t2
         }
-        md.append(f"From {table2} (SNPE-C posterior on the seed maneuver):")
+        md.append(f"From {table2.relative_to(ROOT)} (SNPE-C posterior on the seed maneuver):")
         rows = [(n, out["table2"][n]["posterior_std"]) for n in out["table2"]]
     else:
-        why = "quick run" if args.quick else f"{table2} does not exist yet (run experiments/paper_table2.py)"
+        why = (
+            "quick run"
+            if args.quick
+            else f"{table2.relative_to(ROOT)} does not exist yet (run experiments/paper_table2.py)"
+        )
         out["table2"] = {"missing": why}
         md.append(f"No SBI posterior: {why}. Nothing is filled in.")
     md += [

@@ -21,7 +21,7 @@ from vdsbi.simulator import Inputs
 
 DATA = Path(__file__).parent / "data"
 GOOD = DATA / "good"
-REAL = Path("/work/shared/real")
+REAL = Path(__file__).resolve().parents[2] / "shared" / "real"  # beside the checkout, where present
 R = 0.31  # wheel radius of the good fixture
 
 

@@ -18,7 +18,7 @@ from vdsbi.simulator import CHANNELS, Inputs
 
 DATA = Path(__file__).parent / "data"
 GOOD = DATA / "good"
-REAL = Path("/work/shared/real")
+REAL = Path(__file__).resolve().parents[2] / "shared" / "real"  # beside the checkout, where present
 
 
 def smooth_frame(rate: float, duration: float = 3.0) -> pd.DataFrame:

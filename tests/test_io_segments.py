@@ -7,7 +7,7 @@ import pytest
 
 from vdsbi.io import build_recording, estimate_noise_std, find_segments, read_recording, usable_segments
 
-REAL = Path("/work/shared/real")
+REAL = Path(__file__).resolve().parents[2] / "shared" / "real"  # beside the checkout, where present
 
 
 def drive(noise: float = 0.0, seed: int = 0):

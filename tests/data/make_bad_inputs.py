@@ -113,6 +113,7 @@ def write_recordings(m: dict) -> None:
     bad("t_gap.csv", "t", g.drop(index=range(300, 310)))
     bad("t_in_milliseconds.csv", "t", g.assign(t=g.t * 1000))
     bad("steer_in_degrees.csv", "steer", g.assign(steer=np.degrees(g.steer * 30)))
+    bad("steer_sign_reversed.csv", "steer", g.assign(steer=-g.steer), contains="reversed")
     fast = good_frame(v0=30.0)  # 108 km/h
     bad(
         "vx_in_kmh_highway.csv",

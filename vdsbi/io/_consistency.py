@@ -1,6 +1,8 @@
 """The kinematic consistency checks of a recording: `kinematic_slopes` (d(vx)/dt against `ax`,
 `ay` against vx·yaw_rate) and `consistency_warnings`, which raises on the unit mistakes those
-slopes reveal and returns softer oddities (time base, signs) as warning lines."""
+slopes reveal and returns softer oddities (time base, signs) as warning lines; `steer_response`
+(the yaw rate against the kinematic v·steer/L, which needs the wheelbase) and `steer_problems`,
+which raises on a reversed steer sign and warns on a steering-wheel angle."""
 
 from __future__ import annotations
 
@@ -79,3 +81,78 @@ def consistency_warnings(rec: Recording) -> list[str]:
                 "cornering: check signs and units of ay, vx, yaw_rate"
             )
     return warnings
+
+
+#: The yaw rate is compared with v·steer/L up to this lag, s (steering actuators and tyre
+#: relaxation delay the response by up to a few tenths of a second).
+STEER_MAX_LAG = 0.5
+#: The steer's sign and scale are judged only where the yaw rate follows v·steer/L this closely
+#: (|correlation|); on a straight drive it does not, and nothing is said.
+STEER_MIN_CORRELATION = 0.6
+#: Steady-state yaw rate over v·δ/L is 1/(1 + K·v²/L): about 0.4–1.3 for understeer gradients of
+#: −2 to 6 deg/g at highway speed. Below this the steer column is not the road-wheel angle (a
+#: steering-wheel angle, 12–20 times larger, gives 0.02–0.1).
+STEER_MIN_GAIN = 0.2
+
+
+def steer_response(rec: Recording, wheelbase: float, speed: np.ndarray, min_speed: float = 3.0):
+    """(gain, correlation, lag s) of the yaw rate against the kinematic yaw rate v·steer/L.
+
+    Both are smoothed by a 0.5-s running mean and taken with their means removed (a steer offset
+    or gyro bias does not matter), over samples with `speed` > `min_speed`; the lag in
+    [0, `STEER_MAX_LAG`] with the largest |correlation| is used. None without a yaw rate, or
+    with under a second of moving samples.
+    """
+    if "yaw_rate" not in rec.channels:
+        return None
+    n = max(1, int(round(_KIN_WINDOW * rec.rate)))
+    v = running_mean(speed, n)
+    r = running_mean(rec.channels["yaw_rate"], n)
+    kin = running_mean(speed * rec.steer / wheelbase, n)
+    moving = v > min_speed
+    moving[: n // 2 + 1] = moving[-(n // 2 + 1) :] = False
+    best = None
+    for lag in range(0, int(STEER_MAX_LAG * rec.rate) + 1, max(1, int(round(0.02 * rec.rate)))):
+        m = moving[lag:] & moving[: len(moving) - lag]
+        if m.sum() < rec.rate:
+            return None
+        x, y = kin[: len(kin) - lag][m], r[lag:][m]
+        x, y = x - x.mean(), y - y.mean()
+        sxx, syy = float(np.sum(x * x)), float(np.sum(y * y))
+        if sxx <= 0.0 or syy <= 0.0:
+            return None
+        c = float(np.sum(x * y)) / np.sqrt(sxx * syy)
+        if best is None or abs(c) > abs(best[1]):
+            best = (float(np.sum(x * y)) / sxx, c, lag / rec.rate)
+    return best
+
+
+def steer_problems(rec: Recording, wheelbase: float, speed: np.ndarray) -> list[str]:
+    """Raise on a steer whose sign is reversed; return a warning for one that looks like the
+    steering-wheel angle (`steer_response`).
+
+    Raises:
+        InputError: the yaw rate follows −v·steer/L (steer is positive for a left turn, as
+            the yaw rate is counter-clockwise).
+    """
+    found = steer_response(rec, wheelbase, speed)
+    if found is None:
+        return []
+    gain, c, lag = found
+    if abs(c) < STEER_MIN_CORRELATION:
+        return []
+    if gain < 0.0:
+        raise InputError(
+            rec.source,
+            "steer",
+            f"yaw_rate follows {gain:.2f} × vx·steer/L (correlation {c:.2f}, {lag:.2f} s later): the "
+            "steer sign is reversed; expected steer > 0 turning left (yaw_rate counter-clockwise "
+            "positive): negate steer (or yaw_rate, if ay agrees with steer)",
+        )
+    if gain < STEER_MIN_GAIN:
+        return [
+            f"{rec.source}: steer: yaw_rate is {gain:.3f} × vx·steer/L where ≈ 0.4–1.3 is expected: "
+            "steer looks like the steering-wheel angle; expected the front road-wheel angle (the "
+            "steering-wheel angle over the steering ratio)"
+        ]
+    return []

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..simulator import Vehicle
 from ._bag import is_bag, read_bag
+from ._consistency import steer_problems
 from ._csv import read_csv
 from ._errors import InputError
 from ._parquet import read_parquet
@@ -56,12 +57,30 @@ def read_recording(
 
 
 def check_against_vehicle(rec: Recording, vehicle: Vehicle, *, min_speed: float = 3.0) -> None:
-    """Cross-check wheel speeds against vx with the vehicle's wheel radius.
+    """Cross-check wheel speeds against vx with the vehicle's wheel radius, and the steer
+    against the yaw rate with its wheelbase (`steer_problems`: a warning is added to
+    `rec.warnings`).
 
     Raises:
         InputError: the median of vx / (omega·R) over samples with vx > `min_speed` is outside
-            `SPEED_RATIO_BAND` (≈ 3.6: vx in km/h; ≈ 0.1: omega in rpm; ≈ 0.017: in deg/s).
+            `SPEED_RATIO_BAND` (≈ 3.6: vx in km/h; ≈ 0.1: omega in rpm; ≈ 0.017: in deg/s); the
+            steer's sign is reversed.
     """
+    _check_wheel_speeds(rec, vehicle, min_speed)
+    speed = _speed(rec, vehicle)
+    if speed is not None:
+        rec.warnings.extend(w for w in steer_problems(rec, vehicle.wheelbase, speed) if w not in rec.warnings)
+
+
+def _speed(rec: Recording, vehicle: Vehicle) -> np.ndarray | None:
+    """The measured forward speed: vx, else the mean wheel speed × R; None without either."""
+    if "vx" in rec.channels:
+        return rec.channels["vx"]
+    wheels = [rec.channels[n] for n in ("omega_front", "omega_rear") if n in rec.channels]
+    return np.mean(wheels, axis=0) * vehicle.wheel_radius if wheels else None
+
+
+def _check_wheel_speeds(rec: Recording, vehicle: Vehicle, min_speed: float) -> None:
     if "vx" not in rec.channels:
         return
     vx = rec.channels["vx"]

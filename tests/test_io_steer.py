@@ -1,0 +1,67 @@
+"""The steer checked against the yaw rate with the vehicle's wheelbase (`steer_response`,
+`check_against_vehicle`): a reversed sign is refused naming `steer`, a steering-wheel angle is
+warned about, a consistent steer (lagged or not) and a straight drive pass silently."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vdsbi.io import InputError, build_recording, check_against_vehicle, read_vehicle
+from vdsbi.io._consistency import steer_response
+
+GOOD = Path(__file__).parent / "data" / "good"
+L = 2.7
+
+
+def drive(steer_gain: float = 1.0, lag: float = 0.0, amplitude: float = 0.03, rate: float = 100.0):
+    """20 s at about 15 m/s whose yaw rate is 0.7·v·δ/L (an understeering car), `lag` s after
+    the steer; the steer column is `steer_gain` × the road-wheel angle."""
+    t = np.arange(int(20 * rate) + 1) / rate
+    vx = 15.0 + np.sin(0.3 * t)
+    delta = lambda s: amplitude * np.sin(1.3 * s) + 0.5 * amplitude * np.sin(0.4 * s + 1.0)
+    r = 0.7 * vx * delta(t - lag) / L
+    rng = np.random.default_rng(0)
+    cols = {
+        "t": t,
+        "steer": steer_gain * delta(t),
+        "ax": np.gradient(vx, t) + 0.05 * rng.standard_normal(t.size),
+        "ay": vx * r + 0.05 * rng.standard_normal(t.size),
+        "yaw_rate": r + 0.003 * rng.standard_normal(t.size),
+        "vx": vx,
+    }
+    return build_recording(cols, "drive.csv")
+
+
+@pytest.mark.parametrize("lag", [0.0, 0.2])
+def test_response_gain_and_lag_are_recovered(lag):
+    gain, corr, found = steer_response(drive(lag=lag), L, drive(lag=lag).channels["vx"])
+    assert gain == pytest.approx(0.7, rel=0.1)
+    assert corr > 0.95
+    assert found == pytest.approx(lag, abs=0.03)
+
+
+def test_a_consistent_drive_passes_silently():
+    rec = drive(lag=0.2)
+    check_against_vehicle(rec, read_vehicle(GOOD / "vehicle.json"))
+    assert not any("steer" in w for w in rec.warnings)
+
+
+def test_a_reversed_steer_is_refused_naming_steer():
+    with pytest.raises(InputError, match=r"drive.csv: steer: .*reversed"):
+        check_against_vehicle(drive(steer_gain=-1.0), read_vehicle(GOOD / "vehicle.json"))
+
+
+def test_a_steering_wheel_angle_is_warned_about():
+    rec = drive(steer_gain=15.0)
+    check_against_vehicle(rec, read_vehicle(GOOD / "vehicle.json"))
+    assert any("steering-wheel angle" in w for w in rec.warnings), rec.warnings
+
+
+def test_a_straight_drive_says_nothing():
+    """No steering to speak of: the yaw rate is noise, the correlation low, the sign untold."""
+    rec = drive(amplitude=1e-5, steer_gain=-1.0)
+    check_against_vehicle(rec, read_vehicle(GOOD / "vehicle.json"))
+    assert not any("steer" in w for w in rec.warnings)
