@@ -1,6 +1,7 @@
-"""The steer checked against the yaw rate with the vehicle's wheelbase (`steer_response`,
-`check_against_vehicle`): a reversed sign is refused naming `steer`, a steering-wheel angle is
-warned about, a consistent steer (lagged or not) and a straight drive pass silently."""
+"""The signs of steer, ay and yaw_rate checked against each other when a recording is read (the
+one the other two outvote is named), and the steer's scale against the yaw rate with the
+vehicle's wheelbase (`steer_response`, `check_against_vehicle`): a steering-wheel angle is warned
+about; a consistent steer (lagged or not) and a straight drive pass silently."""
 
 from __future__ import annotations
 
@@ -16,9 +17,16 @@ GOOD = Path(__file__).parent / "data" / "good"
 L = 2.7
 
 
-def drive(steer_gain: float = 1.0, lag: float = 0.0, amplitude: float = 0.03, rate: float = 100.0):
+def drive(
+    steer_gain: float = 1.0,
+    lag: float = 0.0,
+    amplitude: float = 0.03,
+    rate: float = 100.0,
+    flip: tuple[str, ...] = (),
+):
     """20 s at about 15 m/s whose yaw rate is 0.7·v·δ/L (an understeering car), `lag` s after
-    the steer; the steer column is `steer_gain` × the road-wheel angle."""
+    the steer; the steer column is `steer_gain` × the road-wheel angle; the columns `flip`
+    have their sign reversed."""
     t = np.arange(int(20 * rate) + 1) / rate
     vx = 15.0 + np.sin(0.3 * t)
     delta = lambda s: amplitude * np.sin(1.3 * s) + 0.5 * amplitude * np.sin(0.4 * s + 1.0)
@@ -32,7 +40,7 @@ def drive(steer_gain: float = 1.0, lag: float = 0.0, amplitude: float = 0.03, ra
         "yaw_rate": r + 0.003 * rng.standard_normal(t.size),
         "vx": vx,
     }
-    return build_recording(cols, "drive.csv")
+    return build_recording({k: -x if k in flip else x for k, x in cols.items()}, "drive.csv")
 
 
 @pytest.mark.parametrize("lag", [0.0, 0.2])
@@ -49,9 +57,10 @@ def test_a_consistent_drive_passes_silently():
     assert not any("steer" in w for w in rec.warnings)
 
 
-def test_a_reversed_steer_is_refused_naming_steer():
-    with pytest.raises(InputError, match=r"drive.csv: steer: .*reversed"):
-        check_against_vehicle(drive(steer_gain=-1.0), read_vehicle(GOOD / "vehicle.json"))
+@pytest.mark.parametrize("column", ["steer", "ay", "yaw_rate"])
+def test_a_reversed_sign_is_refused_naming_its_column(column):
+    with pytest.raises(InputError, match=rf"drive.csv: {column}: .*negate {column}"):
+        drive(flip=(column,))
 
 
 def test_a_steering_wheel_angle_is_warned_about():
@@ -62,6 +71,6 @@ def test_a_steering_wheel_angle_is_warned_about():
 
 def test_a_straight_drive_says_nothing():
     """No steering to speak of: the yaw rate is noise, the correlation low, the sign untold."""
-    rec = drive(amplitude=1e-5, steer_gain=-1.0)
+    rec = drive(amplitude=1e-5, flip=("steer",))
     check_against_vehicle(rec, read_vehicle(GOOD / "vehicle.json"))
     assert not any("steer" in w for w in rec.warnings)

@@ -114,6 +114,8 @@ def write_recordings(m: dict) -> None:
     bad("t_in_milliseconds.csv", "t", g.assign(t=g.t * 1000))
     bad("steer_in_degrees.csv", "steer", g.assign(steer=np.degrees(g.steer * 30)))
     bad("steer_sign_reversed.csv", "steer", g.assign(steer=-g.steer), contains="reversed")
+    bad("ay_sign_reversed.csv", "ay", g.assign(ay=-g.ay), contains="opposite signs")
+    bad("yaw_rate_sign_reversed.csv", "yaw_rate", g.assign(yaw_rate=-g.yaw_rate), contains="opposite signs")
     fast = good_frame(v0=30.0)  # 108 km/h
     bad(
         "vx_in_kmh_highway.csv",

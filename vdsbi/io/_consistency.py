@@ -1,8 +1,8 @@
 """The kinematic consistency checks of a recording: `kinematic_slopes` (d(vx)/dt against `ax`,
-`ay` against vx·yaw_rate) and `consistency_warnings`, which raises on the unit mistakes those
-slopes reveal and returns softer oddities (time base, signs) as warning lines; `steer_response`
-(the yaw rate against the kinematic v·steer/L, which needs the wheelbase) and `steer_problems`,
-which raises on a reversed steer sign and warns on a steering-wheel angle."""
+`ay` against vx·yaw_rate) and `steer_response` (the yaw rate against v·steer/L);
+`consistency_warnings` raises on the unit and sign mistakes they reveal and returns softer
+oddities as warning lines; `steer_problems` (with the vehicle's wheelbase) warns when the steer
+looks like the steering-wheel angle."""
 
 from __future__ import annotations
 
@@ -21,8 +21,10 @@ def kinematic_slopes(rec: Recording, min_speed: float = 3.0) -> dict[str, float]
 
     - "dvx/dt~ax": d(vx)/dt against ax (1 for consistent units and time base; 3.6 if vx is in
       km/h; 1/k if the time stamps are stretched k-fold).
-    - "ay~vx*yaw_rate": ay against vx·yaw_rate (≈ 1 in steady cornering; ≈ 57 if yaw_rate is in
-      deg/s, ≈ 1/3.6 if vx is in km/h).
+    - "ay~vx*yaw_rate": ay against vx·yaw_rate over the moving samples (≈ 1/57 if yaw_rate is
+      in deg/s, ≈ 1/3.6 if vx is in km/h, < 0 if ay or yaw_rate has the wrong sign);
+      "ay~vx*yaw_rate steady": the same over `STEADY_TURNING` s or more of steady turning, where
+      ay = dv_y/dt + vx·r ≈ vx·r holds (≈ 1; a transient drive's dv_y/dt moves the first).
 
     Only samples with vx > `min_speed` are used; a slope is omitted where its regressor has
     too little variation (std < 0.3 m/s²) to tell.
@@ -43,18 +45,36 @@ def kinematic_slopes(rec: Recording, min_speed: float = 3.0) -> dict[str, float]
         if ax.std() > 0.3:
             out["dvx/dt~ax"] = float(np.sum(dv * ax) / np.sum(ax * ax))
     if "ay" in ch and "yaw_rate" in ch:
-        ay = running_mean(ch["ay"], n)[moving]
-        vr = running_mean(ch["vx"] * ch["yaw_rate"], n)[moving]
+        ay_all, vr_all = running_mean(ch["ay"], n), running_mean(ch["vx"] * ch["yaw_rate"], n)
+        ay, vr = ay_all[moving], vr_all[moving]
         if vr.std() > 0.3:
             out["ay~vx*yaw_rate"] = float(np.sum(ay * vr) / np.sum(vr * vr))
+        steady = moving & _steady_turning(running_mean(ch["yaw_rate"], n), rec.dt)
+        if steady.sum() * rec.dt >= STEADY_TURNING:
+            ay, vr = ay_all[steady], vr_all[steady]
+            out["ay~vx*yaw_rate steady"] = float(np.sum(ay * vr) / np.sum(vr * vr))
     return out
 
 
+#: Seconds of steady turning that the steady-cornering slope of ay against vx·r needs.
+STEADY_TURNING = 1.0
+
+
+def _steady_turning(r: np.ndarray, dt: float) -> np.ndarray:
+    """Samples of a smoothed yaw rate `r` that turn clearly and steadily (as the speed estimate
+    takes them: |r| ≥ `MIN_YAW_RATE`, |dr/dt| ≤ `STEADY`·|r|)."""
+    from ._speed import MIN_YAW_RATE, STEADY
+
+    return (np.abs(r) >= MIN_YAW_RATE) & (np.abs(np.gradient(r, dt)) <= STEADY * np.abs(r))
+
+
 def consistency_warnings(rec: Recording) -> list[str]:
-    """Raise on unit mistakes the kinematics reveal; return softer oddities as warning lines.
+    """Raise on unit and sign mistakes the kinematics reveal; return softer oddities as warning
+    lines.
 
     Raises:
-        InputError: d(vx)/dt ≈ 3.6·ax (vx in km/h) or ay ≈ vx·yaw_rate / 57 (yaw_rate in deg/s).
+        InputError: d(vx)/dt ≈ 3.6·ax (vx in km/h); ay ≈ vx·yaw_rate / 57 (yaw_rate in deg/s);
+            ay, yaw_rate or steer with the wrong sign (`_signs`).
     """
     slopes = kinematic_slopes(rec)
     warnings = []
@@ -68,19 +88,57 @@ def consistency_warnings(rec: Recording) -> list[str]:
                 f"(true rate {rec.original_rate / s:.4g} Hz?) or the units of vx and ax"
             )
     s = slopes.get("ay~vx*yaw_rate")
-    if s is not None:
-        if s < 0.05:
-            raise InputError(
-                rec.source,
-                "yaw_rate",
-                f"ay is {s:.3g} × vx·yaw_rate: yaw_rate looks like deg/s; expected rad/s",
-            )
-        if not 0.6 < s < 1.6:
-            warnings.append(
-                f"{rec.source}: ay: ay is {s:.2f} × vx·yaw_rate where ≈ 1 is expected in steady "
-                "cornering: check signs and units of ay, vx, yaw_rate"
-            )
+    if s is not None and 0.0 < s < 0.05:
+        raise InputError(
+            rec.source,
+            "yaw_rate",
+            f"ay is {s:.3g} × vx·yaw_rate: yaw_rate looks like deg/s; expected rad/s",
+        )
+    _signs(rec, s)
+    s = slopes.get("ay~vx*yaw_rate steady")
+    if s is not None and not 0.6 < s < 1.6:
+        warnings.append(
+            f"{rec.source}: ay: in steady cornering ay is {s:.2f} × vx·yaw_rate where ≈ 1 is "
+            "expected: check the units of ay, vx and yaw_rate"
+        )
     return warnings
+
+
+def _signs(rec: Recording, ay_slope: float | None) -> None:
+    """Raise when ay, yaw_rate or steer has the wrong sign, naming the one the others outvote:
+    ay against vx·yaw_rate (`ay_slope`), and the yaw rate against v·steer (`steer_response`)."""
+    speed = _speed_proxy(rec)
+    found = None if speed is None else steer_response(rec, 1.0, speed)
+    steer_sign = 0 if found is None or abs(found[1]) < STEER_MIN_CORRELATION else np.sign(found[0])
+    expected = "(ay > 0 to the left, yaw_rate > 0 counter-clockwise, steer > 0 turning left)"
+    if ay_slope is not None and ay_slope < 0.0:
+        column = {1: "ay", -1: "yaw_rate"}.get(steer_sign, "ay")
+        other = "steer and ay" if column == "yaw_rate" else "steer and yaw_rate"
+        why = f"; {other} agree" if steer_sign else ""
+        raise InputError(
+            rec.source,
+            column,
+            f"ay is {ay_slope:.2f} × vx·yaw_rate: ay and yaw_rate have opposite signs{why}; expected "
+            f"consistent signs {expected}: negate {column}",
+        )
+    if steer_sign < 0:
+        gain, c, lag = found
+        raise InputError(
+            rec.source,
+            "steer",
+            f"yaw_rate follows v·steer with the opposite sign (correlation {c:.2f}, {lag:.2f} s later)"
+            f"{', and ay agrees with yaw_rate' if ay_slope is not None else ''}: the steer sign is "
+            f"reversed; expected {expected}: negate steer",
+        )
+
+
+def _speed_proxy(rec: Recording) -> np.ndarray | None:
+    """A positive quantity proportional to the forward speed: vx, else the mean wheel speed (its
+    radius is unknown here); None without either."""
+    if "vx" in rec.channels:
+        return rec.channels["vx"]
+    wheels = [rec.channels[n] for n in ("omega_front", "omega_rear") if n in rec.channels]
+    return np.mean(wheels, axis=0) if wheels else None
 
 
 #: The yaw rate is compared with v·steer/L up to this lag, s (steering actuators and tyre
@@ -128,31 +186,17 @@ def steer_response(rec: Recording, wheelbase: float, speed: np.ndarray, min_spee
 
 
 def steer_problems(rec: Recording, wheelbase: float, speed: np.ndarray) -> list[str]:
-    """Raise on a steer whose sign is reversed; return a warning for one that looks like the
-    steering-wheel angle (`steer_response`).
-
-    Raises:
-        InputError: the yaw rate follows −v·steer/L (steer is positive for a left turn, as
-            the yaw rate is counter-clockwise).
-    """
+    """A warning when the steer looks like the steering-wheel angle: the yaw rate follows
+    v·steer/L (`steer_response`) with a gain below `STEER_MIN_GAIN`. (Its sign was checked when
+    the recording was read.)"""
     found = steer_response(rec, wheelbase, speed)
     if found is None:
         return []
-    gain, c, lag = found
-    if abs(c) < STEER_MIN_CORRELATION:
+    gain, c, _ = found
+    if abs(c) < STEER_MIN_CORRELATION or not 0.0 < gain < STEER_MIN_GAIN:
         return []
-    if gain < 0.0:
-        raise InputError(
-            rec.source,
-            "steer",
-            f"yaw_rate follows {gain:.2f} × vx·steer/L (correlation {c:.2f}, {lag:.2f} s later): the "
-            "steer sign is reversed; expected steer > 0 turning left (yaw_rate counter-clockwise "
-            "positive): negate steer (or yaw_rate, if ay agrees with steer)",
-        )
-    if gain < STEER_MIN_GAIN:
-        return [
-            f"{rec.source}: steer: yaw_rate is {gain:.3f} × vx·steer/L where ≈ 0.4–1.3 is expected: "
-            "steer looks like the steering-wheel angle; expected the front road-wheel angle (the "
-            "steering-wheel angle over the steering ratio)"
-        ]
-    return []
+    return [
+        f"{rec.source}: steer: yaw_rate is {gain:.3f} × vx·steer/L where ≈ 0.4–1.3 is expected: "
+        "steer looks like the steering-wheel angle; expected the front road-wheel angle (the "
+        "steering-wheel angle over the steering ratio)"
+    ]
