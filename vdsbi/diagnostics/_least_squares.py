@@ -109,6 +109,9 @@ def levenberg_marquardt(
     """
     z0 = jnp.asarray(z0)
     dtype = z0.dtype
+    # One jitted residual: its shape, the trials and the Jacobian then share one trace of it
+    # (for a simulation, tracing is a large part of compiling the fit).
+    fn = jax.jit(fn)
     prec = jnp.zeros_like(z0) if prior_precision is None else jnp.asarray(prior_precision, dtype)
     mean = jnp.zeros_like(z0) if prior_mean is None else jnp.asarray(prior_mean, dtype)
     both = (lambda z: _residual_and_jacobian(fn, z)) if jacobian is None else jacobian
