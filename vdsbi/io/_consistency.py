@@ -107,7 +107,7 @@ def consistency_warnings(rec: Recording) -> list[str]:
 def _signs(rec: Recording, ay_slope: float | None) -> None:
     """Raise when ay, yaw_rate or steer has the wrong sign, naming the one the others outvote:
     ay against vx·yaw_rate (`ay_slope`), and the yaw rate against v·steer (`steer_response`)."""
-    speed = _speed_proxy(rec)
+    speed = rec.speed(1.0)  # a wheel speed, proportional to it, is enough for a sign
     found = None if speed is None else steer_response(rec, 1.0, speed)
     steer_sign = 0 if found is None or abs(found[1]) < STEER_MIN_CORRELATION else np.sign(found[0])
     expected = "(ay > 0 to the left, yaw_rate > 0 counter-clockwise, steer > 0 turning left)"
@@ -130,15 +130,6 @@ def _signs(rec: Recording, ay_slope: float | None) -> None:
             f"{', and ay agrees with yaw_rate' if ay_slope is not None else ''}: the steer sign is "
             f"reversed; expected {expected}: negate steer",
         )
-
-
-def _speed_proxy(rec: Recording) -> np.ndarray | None:
-    """A positive quantity proportional to the forward speed: vx, else the mean wheel speed (its
-    radius is unknown here); None without either."""
-    if "vx" in rec.channels:
-        return rec.channels["vx"]
-    wheels = [rec.channels[n] for n in ("omega_front", "omega_rear") if n in rec.channels]
-    return np.mean(wheels, axis=0) if wheels else None
 
 
 #: The yaw rate is compared with v·steer/L up to this lag, s (steering actuators and tyre

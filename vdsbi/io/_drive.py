@@ -67,17 +67,9 @@ def check_against_vehicle(rec: Recording, vehicle: Vehicle, *, min_speed: float 
             steer's sign is reversed.
     """
     _check_wheel_speeds(rec, vehicle, min_speed)
-    speed = _speed(rec, vehicle)
+    speed = rec.speed(vehicle.wheel_radius)
     if speed is not None:
         rec.warnings.extend(w for w in steer_problems(rec, vehicle.wheelbase, speed) if w not in rec.warnings)
-
-
-def _speed(rec: Recording, vehicle: Vehicle) -> np.ndarray | None:
-    """The measured forward speed: vx, else the mean wheel speed × R; None without either."""
-    if "vx" in rec.channels:
-        return rec.channels["vx"]
-    wheels = [rec.channels[n] for n in ("omega_front", "omega_rear") if n in rec.channels]
-    return np.mean(wheels, axis=0) * vehicle.wheel_radius if wheels else None
 
 
 def _check_wheel_speeds(rec: Recording, vehicle: Vehicle, min_speed: float) -> None:
