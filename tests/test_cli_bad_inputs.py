@@ -66,10 +66,16 @@ def test_good_input_passes_and_writes_dir(tmp_path, capsys):
     captured = capsys.readouterr()
     assert status == 0, captured.err
     assert "channels   ax, ay, yaw_rate, omega_front, omega_rear, vx" in captured.out
+    assert "kinematics d(vx)/dt = 1.00 × ax" in captured.out
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
     again = read_recording(out / "recording.csv")
     assert again.channel_names == ("ax", "ay", "yaw_rate", "omega_front", "omega_rear", "vx")
-    assert json.loads((out / "summary.json").read_text())["samples"] == again.num_samples
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["samples"] == again.num_samples
+    # the fixture's yaw rate is 0.1·sin 2t at 10 ± 1 m/s with steer 0.03·sin 2t: 9/v ≈ 0.9 of
+    # v·δ/L, in step with the steer
+    k = summary["kinematics"]
+    assert k["yaw_rate~v*steer/L"] == pytest.approx(0.9, abs=0.06) and k["steer_lag_s"] == 0.0
 
 
 def test_subprocess_exit_status_and_no_traceback(tmp_path):

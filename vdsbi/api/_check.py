@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..io import Recording, estimate_noise_std, find_segments, load_drive
+from ..io import Recording, estimate_noise_std, find_segments, kinematic_slopes, load_drive, steer_response
 from ..simulator import Vehicle
 
 
@@ -18,7 +18,7 @@ from ..simulator import Vehicle
 class CheckResult:
     """A recording read as `identify` reads it, its vehicle, and `summary` (summary.json:
     duration, rates, channels, speed range, usable and rejected segments, noise estimate,
-    warnings)."""
+    kinematics, warnings)."""
 
     rec: Recording
     vehicle: Vehicle
@@ -58,6 +58,19 @@ def check(
         "usable_segments": [[round(a, 3), round(b, 3)] for a, b in usable],
         "rejected_segments": [[round(s.t0, 3), round(s.t1, 3), s.reason] for s in segs if not s.usable],
         "noise_std_estimate": estimate_noise_std(rec, segments=usable or None),
+        "kinematics": kinematics(rec, veh),
         "warnings": list(rec.warnings),
     }
     return CheckResult(rec, veh, summary)
+
+
+def kinematics(rec: Recording, vehicle: Vehicle) -> dict[str, float]:
+    """The kinematic slopes the reading checks (`kinematic_slopes`), and the yaw rate's response
+    to the steer (`steer_response`): its gain over v·δ/L (1/(1 + K·v²/L) for an understeer
+    gradient K) and the lag, s, at which it follows the steer best (actuator and tyre lag)."""
+    out = dict(kinematic_slopes(rec))
+    speed = rec.speed(vehicle.wheel_radius)
+    found = None if speed is None else steer_response(rec, vehicle.wheelbase, speed)
+    if found is not None:
+        out |= {"yaw_rate~v*steer/L": found[0], "steer_correlation": found[1], "steer_lag_s": found[2]}
+    return out

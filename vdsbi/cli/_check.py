@@ -42,6 +42,8 @@ def run(args) -> int:
         print(f"             {a:8.2f} .. {b:8.2f} s")
     noise = ", ".join(f"{k} {v:.3g}" for k, v in s["noise_std_estimate"].items())
     print(f"  noise std  {noise} (estimated; vehicle noise_std: {dict(res.vehicle.noise_std) or 'none'})")
+    if s["kinematics"]:
+        print(f"  kinematics {_kinematics(s['kinematics'])}")
     for w in s["warnings"]:
         print(f"  warning: {w}")
     if args.out:
@@ -49,3 +51,19 @@ def run(args) -> int:
             res.save(d)
         print(f"wrote {args.out}/recording.csv, summary.json")
     return 0
+
+
+def _kinematics(k: dict) -> str:
+    """The kinematic slopes in one line (≈ 1 each where units and signs agree)."""
+    parts = []
+    if "dvx/dt~ax" in k:
+        parts.append(f"d(vx)/dt = {k['dvx/dt~ax']:.2f} × ax")
+    if "ay~vx*yaw_rate steady" in k:
+        parts.append(f"ay = {k['ay~vx*yaw_rate steady']:.2f} × vx·yaw_rate turning steadily")
+    if "yaw_rate~v*steer/L" in k:
+        lag = k["steer_lag_s"]
+        parts.append(
+            f"yaw_rate = {k['yaw_rate~v*steer/L']:.2f} × v·steer/L, {lag:.2f} s after the steer "
+            f"(correlation {k['steer_correlation']:.2f})"
+        )
+    return "; ".join(parts)

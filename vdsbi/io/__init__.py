@@ -9,7 +9,7 @@ from ._bag import (
     read_bag as read_bag,
 )
 from ._bag_writer import write_bag as write_bag
-from ._consistency import kinematic_slopes as kinematic_slopes
+from ._consistency import kinematic_slopes as kinematic_slopes, steer_response as steer_response
 from ._contract import LIMITS as LIMITS, build_recording as build_recording
 from ._csv import read_csv as read_csv
 from ._drive import (
