@@ -95,6 +95,11 @@ def consistency_warnings(rec: Recording) -> list[str]:
             f"ay is {s:.3g} × vx·yaw_rate: yaw_rate looks like deg/s; expected rad/s",
         )
     _signs(rec, s)
+    if s is not None and -AY_MIN_SLOPE <= s <= 0.0:
+        warnings.append(
+            f"{rec.source}: ay: ay is {s:.2f} × vx·yaw_rate where ≈ 1 is expected: check the signs "
+            "and units of ay, vx and yaw_rate"
+        )
     s = slopes.get("ay~vx*yaw_rate steady")
     if s is not None and not 0.6 < s < 1.6:
         warnings.append(
@@ -111,7 +116,7 @@ def _signs(rec: Recording, ay_slope: float | None) -> None:
     found = None if speed is None else steer_response(rec, 1.0, speed)
     steer_sign = 0 if found is None or abs(found[1]) < STEER_MIN_CORRELATION else np.sign(found[0])
     expected = "(ay > 0 to the left, yaw_rate > 0 counter-clockwise, steer > 0 turning left)"
-    if ay_slope is not None and ay_slope < 0.0:
+    if ay_slope is not None and ay_slope < -AY_MIN_SLOPE:
         column = {1: "ay", -1: "yaw_rate"}.get(steer_sign, "ay")
         other = "steer and ay" if column == "yaw_rate" else "steer and yaw_rate"
         why = f"; {other} agree" if steer_sign else ""
@@ -136,8 +141,11 @@ def _signs(rec: Recording, ay_slope: float | None) -> None:
 #: relaxation delay the response by up to a few tenths of a second).
 STEER_MAX_LAG = 0.5
 #: The steer's sign and scale are judged only where the yaw rate follows v·steer/L this closely
-#: (|correlation|); on a straight drive it does not, and nothing is said.
-STEER_MIN_CORRELATION = 0.6
+#: (|correlation|): a reversed sign gives −0.9 to −1 on real drives; a straight drive, or one
+#: whose slides are counter-steered, stays well inside.
+STEER_MIN_CORRELATION = 0.8
+#: ay against vx·yaw_rate below −this is a reversed sign (above it and below 0: a warning).
+AY_MIN_SLOPE = 0.2
 #: Steady-state yaw rate over v·δ/L is 1/(1 + K·v²/L): about 0.4–1.3 for understeer gradients of
 #: −2 to 6 deg/g at highway speed. Below this the steer column is not the road-wheel angle (a
 #: steering-wheel angle, 12–20 times larger, gives 0.02–0.1).
