@@ -11,6 +11,7 @@ import numpy as np
 from ._errors import InputError
 from ._recording import Recording
 from ._resample import running_mean
+from ._speed import MIN_YAW_RATE, STEADY
 
 #: Running-mean window, s, for the kinematic consistency checks below.
 _KIN_WINDOW = 0.5
@@ -63,8 +64,6 @@ STEADY_TURNING = 1.0
 def _steady_turning(r: np.ndarray, dt: float) -> np.ndarray:
     """Samples of a smoothed yaw rate `r` that turn clearly and steadily (as the speed estimate
     takes them: |r| ≥ `MIN_YAW_RATE`, |dr/dt| ≤ `STEADY`·|r|)."""
-    from ._speed import MIN_YAW_RATE, STEADY
-
     return (np.abs(r) >= MIN_YAW_RATE) & (np.abs(np.gradient(r, dt)) <= STEADY * np.abs(r))
 
 

@@ -63,8 +63,7 @@ def check_against_vehicle(rec: Recording, vehicle: Vehicle, *, min_speed: float 
 
     Raises:
         InputError: the median of vx / (omega·R) over samples with vx > `min_speed` is outside
-            `SPEED_RATIO_BAND` (≈ 3.6: vx in km/h; ≈ 0.1: omega in rpm; ≈ 0.017: in deg/s); the
-            steer's sign is reversed.
+            `SPEED_RATIO_BAND` (≈ 3.6: vx in km/h; ≈ 0.1: omega in rpm; ≈ 0.017: in deg/s).
     """
     _check_wheel_speeds(rec, vehicle, min_speed)
     speed = rec.speed(vehicle.wheel_radius)
