@@ -5,10 +5,10 @@
 The other simulator is `linear_baseline`'s single-track model (numpy, nothing of vdsbi's): linear
 tyres, or for a race car magic-formula tyres cornering at up to ~1.4 g (`RACE_CAR`: 250 Hz); a yaw
 inertia that is not m·l_f·l_r, the car responding `lag` s after the logged steer, white sensor
-noise on a_y, yaw rate, speed and steer, sampled at `rate` Hz, no wheel speeds and no torques.
-Each `CASES` drive (90 s: a smooth random steer, the speed swinging between 12 and 22 m/s; the
-race car's steer scaled to its speed for a lateral acceleration near the grip, between 13 and
-31 m/s) goes through `real_drives.run_one`: vdsbi's default `identify` on the first 70 %,
+noise on a_y, yaw rate, speed and steer, sampled at `rate` Hz (10 to 250), no wheel speeds and
+no torques. Each `CASES` drive (90 s: a smooth random steer, the speed swinging between 12 and
+22 m/s; the race car's steer scaled to its speed for a lateral acceleration near the grip,
+between 13 and 31 m/s) goes through `real_drives.run_one`: vdsbi's default `identify` on the first 70 %,
 held-out NRMSE of yaw rate and a_y on the rest against the least-squares fit of the linear model
 (the linear cars' own model class, with the true l_f and I_z: without a delay, with the steer
 delay its training cost picks, and at the true lag), the 90 % band's coverage, and each truth (l_f, C_αf,
@@ -52,6 +52,14 @@ CASES = {
         70e3,
         95e3,
         4,
+    ),
+    "linear car @ 10 Hz, 0.1 s lag": (
+        10.0,
+        0.1,
+        linear_baseline.Car(1500.0, 1.15, 1.5, 2600.0),
+        80e3,
+        100e3,
+        11,
     ),
     "linear car @ 100 Hz, no lag": (
         100.0,

@@ -275,3 +275,39 @@ def test_the_screen_keeps_a_quadratic_posterior_and_cuts_draws_past_a_wall(x64, 
     draws, kept = screened_sample(getkey(), flat, prob, 256)
     assert wide > 5 * spread and kept < 0.5
     assert draws[:, i].std() < 2 * spread
+
+
+def test_a_delay_the_model_lacks_moves_the_transient_half_against_the_steady_one():
+    from types import SimpleNamespace
+
+    from vdsbi.diagnostics._likelihood_widening import consistent_covariance, data_splits
+
+    # One gain fitted to a lateral response that lags its input by 0.1 s: steady cornering
+    # (a plateau) says the gain is 1, the fast slalom says less; noise 0.02.
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 20.0, 0.02)
+    u = lambda s: np.where(s < 10.0, np.clip(s / 2.0, 0.0, 1.0), np.cos(2 * np.pi * 1.2 * (s - 10.0)))  # noqa: E731
+    y = u(t - 0.1) + 0.02 * rng.standard_normal(t.size)
+    x = u(t)
+    gain = float(x @ y / (x @ x + 1e-6))
+    data = SimpleNamespace(y=y[None, :, None], channels=("ay",))
+    mask = np.ones((1, t.size), bool)
+    splits = dict(data_splits(data, mask))
+    assert list(splits) == [
+        "high against low lateral motion",
+        "transient against steady lateral motion",
+        "first against second half",
+    ]
+    for half in splits.values():
+        assert 0.45 < half.mean() < 0.55
+    jac, r = (x / 0.02)[None, :, None, None], ((gain * x - y) / 0.02)[None, :, None]
+    cov = np.array([[1.0 / (jac.ravel() @ jac.ravel() + 1e-6)]])
+    _, shifts, _ = consistent_covariance(
+        cov,
+        jac,
+        r,
+        np.array([gain]),
+        np.array([1e-6]),
+        [(n, splits[n]) for n in ("transient against steady lateral motion",)],
+    )
+    assert shifts and shifts[0]["sigmas"] > 2.0

@@ -1,10 +1,10 @@
 """How the likelihood posterior's Laplace covariance is widened by the model error the data
-reveal: `robust_covariance` takes each parameter's variance up to the block-sandwich estimate of how much
-the fit moves between stretches of driving, `data_splits` names the ways to halve the fitted samples
-(by channel, by excitation, by time), and `consistent_covariance` scales the covariance when two halves
-cannot share one θ and adds a parameter's squared shift to its variance where they disagree on
-it. Each takes whitened Jacobians and residuals as numpy arrays and returns the widened
-covariance."""
+reveal: `robust_covariance` takes each parameter's variance up to the block-sandwich estimate of
+how much the fit moves between stretches of driving, `data_splits` names the ways to halve the
+fitted samples (by channel, by excitation, by transience, by time), and `consistent_covariance`
+scales the covariance when two halves cannot share one θ and adds a parameter's squared shift to
+its variance where they disagree on it. Each takes whitened Jacobians and residuals as numpy
+arrays and returns the widened covariance."""
 
 from __future__ import annotations
 
@@ -62,17 +62,22 @@ JOINT_LEVEL = 0.95
 def data_splits(data: Problem, mask: np.ndarray) -> list[tuple[str, np.ndarray]]:
     """Ways to halve the fitted samples, as (name, (W, K, C) mask of half A; half B is the rest):
     by channel (a_y against yaw rate), by excitation (the samples with the larger measured lateral
-    motion), and by time (the first windows against the last). A right model explains each half
-    with the same θ; a missing effect usually does not act alike on both."""
+    motion), by transience (the samples where it changes faster: a delay or a wrong yaw inertia
+    acts on transients and not on steady cornering) and by time (the first windows against the
+    last). A right model explains each half with the same θ; a missing effect usually does not
+    act alike on both."""
     W, K, C = data.y.shape
     full = np.broadcast_to(mask[..., None], (W, K, C))
     out = []
     if "ay" in data.channels and "yaw_rate" in data.channels:
         out.append(("ay against yaw rate", full & (np.arange(C) == data.channels.index("ay"))))
-    lateral = data.channels.index("ay") if "ay" in data.channels else data.channels.index("yaw_rate")
-    level = np.abs(data.y[..., lateral]) if "ay" in data.channels or "yaw_rate" in data.channels else None
-    if level is not None:
-        out.append(("high against low lateral motion", full & (level >= np.median(level[mask]))[..., None]))
+    if "ay" in data.channels or "yaw_rate" in data.channels:
+        lateral = np.asarray(data.y[..., data.channels.index("ay" if "ay" in data.channels else "yaw_rate")])
+        for name, size in (
+            ("high against low lateral motion", np.abs(lateral)),
+            ("transient against steady lateral motion", np.abs(np.gradient(lateral, axis=1))),
+        ):
+            out.append((name, full & (size >= np.median(size[mask]))[..., None]))
     if W >= 2:
         out.append(("first against last windows", full & (np.arange(W) < W // 2)[:, None, None]))
     else:
