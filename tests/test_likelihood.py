@@ -302,12 +302,8 @@ def test_a_delay_the_model_lacks_moves_the_transient_half_against_the_steady_one
         assert 0.45 < half.mean() < 0.55
     jac, r = (x / 0.02)[None, :, None, None], ((gain * x - y) / 0.02)[None, :, None]
     cov = np.array([[1.0 / (jac.ravel() @ jac.ravel() + 1e-6)]])
+    transient = "transient against steady lateral motion"
     _, shifts, _ = consistent_covariance(
-        cov,
-        jac,
-        r,
-        np.array([gain]),
-        np.array([1e-6]),
-        [(n, splits[n]) for n in ("transient against steady lateral motion",)],
+        cov, jac, r, np.array([gain]), np.array([1e-6]), [(transient, splits[transient])]
     )
     assert shifts and shifts[0]["sigmas"] > 2.0
