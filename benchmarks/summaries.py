@@ -28,12 +28,12 @@ from vdsbi.inference import IdentifySettings, identify, observation, seed_prior
 from vdsbi.simulator import (
     PARAM_NAMES,
     SEED_CHANNELS,
+    SensorNoise,
     StiffnessMixtureNoise,
     StochasticSimulator,
     default_vehicle,
     make_model,
     seed_profile,
-    sensor_noise,
 )
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -69,7 +69,7 @@ def main(argv=None):
         inputs,
         SEED_CHANNELS,
         (10.0, 11.0),
-        sensor_noise("seed"),
+        SensorNoise.seed(),
         StiffnessMixtureNoise(k_mix),
     )
     prior = seed_prior()

@@ -33,12 +33,12 @@ from vdsbi.simulator import (
     PARAM_NAMES,
     SEED_CHANNELS,
     SEED_TRUE_THETA,
+    SensorNoise,
     StiffnessMixtureNoise,
     StochasticSimulator,
     default_vehicle,
     make_model,
     seed_profile,
-    sensor_noise,
     theta_from_dict,
 )
 
@@ -126,7 +126,7 @@ def main(argv=None) -> dict:
         inputs,
         SEED_CHANNELS,
         (10.0, 11.0),
-        sensor_noise("seed"),
+        SensorNoise.seed(),
         StiffnessMixtureNoise(k_mix),
     )
     truth = theta_from_dict(SEED_TRUE_THETA)

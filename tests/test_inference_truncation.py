@@ -55,10 +55,10 @@ def test_ellipsoid_and_prior_rejection_draw_the_same_truncated_prior(getkey, mon
     flow, prior, x_o = _region(getkey(), d=3, width=0.3, centre=4.5)
     n, key = 2000, getkey()  # one key: the same reference draws, hence the same region
     by_prior, info_p = _truncation.truncated_prior(
-        key, flow, prior, x_o, n, num_samples=SAMPLES, proposal="prior"
+        key, flow, prior, x_o, n, num_samples=SAMPLES, ellipsoid=False
     )
     by_ell, info_e = _truncation.truncated_prior(
-        key, flow, prior, x_o, n, num_samples=SAMPLES, proposal="ellipsoid"
+        key, flow, prior, x_o, n, num_samples=SAMPLES, ellipsoid=True
     )
     assert info_p["num_filled"] == info_e["num_filled"] == 0
     assert info_e["region_covered"] and (info_e["ellipsoid_growths"] > 0) == (scale < 1)
@@ -86,7 +86,7 @@ def test_unreachable_region_is_filled_from_the_wider_proposal_and_warned(getkey,
     flow, prior, x_o = _region(getkey(), d=10, width=0.1)
     with pytest.warns(UserWarning, match="wider prior region"):
         theta, info = _truncation.truncated_prior(
-            getkey(), flow, prior, x_o, 1000, num_samples=SAMPLES, proposal="prior"
+            getkey(), flow, prior, x_o, 1000, num_samples=SAMPLES, ellipsoid=False
         )
     assert info["num_filled"] == 1000 - round(info["acceptance"] * 10_000) > 900
     theta = np.asarray(theta)

@@ -10,11 +10,11 @@ from vdsbi.simulator import (
     PARAM_NAMES,
     SEED_TRUE_THETA,
     Decimator,
+    SensorNoise,
     StochasticSimulator,
     default_vehicle,
     make_model,
     seed_profile,
-    sensor_noise,
 )
 
 RATE, CUTOFF, FACTOR = 200.0, 10.0, 4
@@ -37,9 +37,8 @@ def test_pass_band_within_one_percent(x64):
         assert err.max() < 0.01  # edges included (odd reflection); measured 1.7e-3
 
 
-@pytest.mark.parametrize("edge", ["odd", "even", "hold"])
-def test_stop_band_beyond_thirty_db(x64, edge):
-    dec = Decimator(RATE, CUTOFF, FACTOR, edge=edge)
+def test_stop_band_beyond_thirty_db(x64):
+    dec = Decimator(RATE, CUTOFF, FACTOR)
     e = dec.edge_samples
     y = np.asarray(dec(sine(3 * CUTOFF)))
     gain_db = lambda v: 10 * np.log10(np.mean(v**2) / 0.5)
@@ -48,13 +47,11 @@ def test_stop_band_beyond_thirty_db(x64, edge):
     assert gain_db(y) < -30
 
 
-@pytest.mark.parametrize("edge", ["odd", "even", "hold"])
-def test_constants_pass_exactly_and_odd_edges_keep_ramps(x64, edge):
-    dec = Decimator(RATE, CUTOFF, FACTOR, edge=edge)
+def test_constants_and_ramps_pass_exactly_edges_included(x64):
+    dec = Decimator(RATE, CUTOFF, FACTOR)
     np.testing.assert_allclose(dec(np.full(301, 2.5)), 2.5, rtol=1e-14)
-    if edge == "odd":
-        ramp = 3.0 + 0.5 * T
-        np.testing.assert_allclose(dec(ramp), ramp[::FACTOR], rtol=1e-13)
+    ramp = 3.0 + 0.5 * T
+    np.testing.assert_allclose(dec(ramp), ramp[::FACTOR], rtol=1e-13)
 
 
 def test_shapes_times_and_numpy_equals_jax(getkey):
@@ -91,12 +88,10 @@ def test_bad_arguments_raise():
         Decimator(RATE, 30.0, FACTOR)  # above the output Nyquist rate 25 Hz
     with pytest.raises(ValueError, match="factor"):
         Decimator(RATE, CUTOFF, 0)
-    with pytest.raises(ValueError, match="edge"):
-        Decimator(RATE, CUTOFF, FACTOR, edge="zero")
     dec = Decimator(RATE, CUTOFF, FACTOR)
     with pytest.raises(ValueError, match="too few"):
         dec(np.zeros(dec.half_length))
-    assert Decimator(RATE, CUTOFF, FACTOR, edge="hold")(np.zeros(5)).shape == (2,)
+    assert dec(np.zeros(dec.half_length + 1)).shape == (dec.num_out(dec.half_length + 1),)
 
 
 def test_stochastic_simulator_filters_the_noise(getkey):
@@ -109,7 +104,7 @@ def test_stochastic_simulator_filters_the_noise(getkey):
         inputs=inputs,
         channels=("ay", "yaw_rate"),
         v0_range=(10.0, 11.0),
-        sensor_noise=sensor_noise("seed"),
+        sensor_noise=SensorNoise.seed(),
     )
     decimating = StochasticSimulator(
         model=plain.model,
@@ -138,7 +133,7 @@ def test_stochastic_simulator_lateral0_field_and_argument(getkey):
         inputs=inputs,
         channels=("yaw_rate", "ay"),
         v0_range=(10.0, 11.0),
-        sensor_noise=sensor_noise("none"),
+        sensor_noise=SensorNoise.none(),
     )
     key = getkey()
     fixed, _ = StochasticSimulator(**kwargs, lateral0=lateral0)(key, theta)

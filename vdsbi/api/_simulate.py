@@ -14,12 +14,20 @@ from ..simulator import (
     CHANNELS,
     AbstractVehicleModel,
     Inputs,
+    SensorNoise,
     SpeedDriven,
     TorqueDriven,
     Vehicle,
     model_class,
 )
 from ._validate import PROFILE_V0, checked_theta, checked_v0, first_speed, load_vehicle
+
+#: `simulate`'s ``noise`` names: the sensor noise each adds, from the vehicle file's noise_std.
+NOISE = {
+    "none": lambda noise_std: None,
+    "seed": lambda noise_std: SensorNoise.seed(),
+    "vehicle": SensorNoise.additive_std,
+}
 
 
 @dataclasses.dataclass
@@ -102,7 +110,7 @@ def simulate(
     """
     import jax
 
-    from ..simulator import seed_profile, sensor_noise, simulate as solve_one
+    from ..simulator import seed_profile, simulate as solve_one
 
     if inputs is None:
         inputs, v0 = seed_profile(), PROFILE_V0 if v0 is None else v0
@@ -114,8 +122,11 @@ def simulate(
     if v0 is None and rec is None:
         raise InputError("--v0", "v0", "give an initial speed for bare inputs")
     v0 = first_speed(rec, veh) if v0 is None else checked_v0(v0)
+    if noise not in NOISE:
+        raise InputError("--noise", noise, f"must be one of {', '.join(NOISE)}")
     if noise == "vehicle" and not veh.noise_std:
         raise InputError(source, "noise_std", "--noise vehicle needs noise_std in the vehicle file")
+    add_noise = NOISE[noise](veh.noise_std or {})
     lateral0 = None if rec is None else _lateral0(rec, th, veh, v0)
     ys, ok = solve_one(
         th,
@@ -127,8 +138,8 @@ def simulate(
         longitudinal=mode,
         lateral0=lateral0,
     )
-    if ok and noise != "none":
-        ys = np.asarray(sensor_noise(noise, veh.noise_std)(jax.random.key(seed), ys))
+    if ok and add_noise is not None:
+        ys = np.asarray(add_noise(jax.random.key(seed), ys))
     return _result(rec if rec is not None else inp, inp, ys, ok, th, v0)
 
 

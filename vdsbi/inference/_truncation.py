@@ -130,15 +130,16 @@ def truncated_prior(
     epsilon: float = 1e-4,
     num_samples: int = 10_000,
     *,
-    proposal: str = "auto",
+    ellipsoid: bool | None = None,
 ) -> tuple[Array, dict[str, Any]]:
     """``n`` draws of the prior restricted to the ``1 - epsilon`` HPD region of ``flow`` at
     ``x_o``, whose level is the ``epsilon`` quantile of the flow's log density at
     ``num_samples`` of its own draws.
 
-    ``proposal``: ``"auto"`` (the ellipsoid when its part inside the box is smaller than the
-    box; a posterior with far-flung draws can make it larger), ``"prior"`` or
-    ``"ellipsoid"`` (both exact; forcing one is for tests). A round that finds fewer than ``n``
+    ``ellipsoid``: where candidates are drawn. None (default): from an ellipsoid around the
+    posterior's draws when its part inside the box is smaller than the box (a posterior with
+    far-flung draws can make it larger), else from the prior; True or False forces the
+    ellipsoid or the prior (both are exact). A round that finds fewer than ``n``
     is filled up (``info["num_filled"]``, warned) with draws of the proposal itself: uniform on
     the box, or on the ellipsoid around all the posterior's draws, it is a truncated prior too,
     only a wider one, so the fit stays unbiased; posterior draws would not.
@@ -156,9 +157,9 @@ def truncated_prior(
     box_log_volume = float(jnp.sum(jnp.log(prior.high - prior.low)))
     for growth in range(_GROWTHS + 1):
         k_pilot, k_draw = jax.random.split(k_draw)
-        share = 1.0 if proposal == "prior" else _box_share(k_pilot, ell, prior)
+        share = 1.0 if ellipsoid is False else _box_share(k_pilot, ell, prior)
         smaller = ell.log_volume() + math.log(share) < box_log_volume
-        if proposal == "prior" or (proposal == "auto" and (not smaller or share < _MIN_SHARE)):
+        if ellipsoid is False or (ellipsoid is None and (not smaller or share < _MIN_SHARE)):
             propose = partial(_box_draws, prior=prior)
             acc, drawn = _reject(k_draw, propose, keep, n)
             info = {"region_proposal": "prior"}

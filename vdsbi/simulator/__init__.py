@@ -37,7 +37,6 @@ from ._sensors import (
     SEED_RELATIVE_NOISE as SEED_RELATIVE_NOISE,
     SensorNoise as SensorNoise,
     StiffnessMixtureNoise as StiffnessMixtureNoise,
-    sensor_noise as sensor_noise,
 )
 from ._sharding import shard_draws as shard_draws
 from ._solve import (

@@ -16,8 +16,6 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-EDGES: tuple[str, ...] = ("odd", "even", "hold")
-
 
 class Decimator(eqx.Module):
     """Zero-phase windowed-sinc (Hamming) low-pass, then keep every `factor`-th sample.
@@ -28,26 +26,23 @@ class Decimator(eqx.Module):
     main lobe needs N ≈ 3.3·rate/Δf taps; its gain is 1 ± 0.2 % below cutoff − Δf/2 and
     below −50 dB above cutoff + Δf/2. The taps sum to 1 exactly (DC passes unchanged).
 
-    Edges are padded by `edge`: "odd" reflects the signal through its end value
-    (2·y₀ − y_k; keeps value and slope, so a ramp passes unchanged, scipy's filtfilt
-    default), "even" mirrors it (y_k; keeps the value, bends a ramp) or "hold" repeats the
-    end value. Within `edge_samples` output samples of either end the padding matters: with
-    "odd", the end sample itself carries much of the weight there, so its high-frequency
-    content (noise, vibration) is attenuated less than in the interior.
+    Edges are padded by odd reflection through the end value (2·y₀ − y_k, scipy's filtfilt
+    default): it keeps value and slope, so a ramp passes unchanged. Within `edge_samples`
+    output samples of either end the padding matters: the end sample itself carries much of
+    the weight there, so its high-frequency content (noise, vibration) is attenuated less
+    than in the interior.
 
     Attributes:
         rate: input sample rate, Hz.
         cutoff: −6 dB frequency, Hz; at most the output Nyquist rate/(2·factor).
         factor: integer decimation factor (1: filter only).
         transition: transition width Δf, Hz; None for Δf = cutoff.
-        edge: "odd", "even" or "hold".
     """
 
     rate: float = eqx.field(static=True)
     cutoff: float = eqx.field(static=True)
     factor: int = eqx.field(static=True, default=1)
     transition: float | None = eqx.field(static=True, default=None)
-    edge: str = eqx.field(static=True, default="odd")
 
     def __check_init__(self):
         if not (isinstance(self.factor, int) and self.factor >= 1):
@@ -62,8 +57,6 @@ class Decimator(eqx.Module):
             )
         if self.transition is not None and not self.transition > 0:
             raise ValueError(f"decimator: transition must be > 0 Hz, got {self.transition!r}")
-        if self.edge not in EDGES:
-            raise ValueError(f"decimator: edge must be one of {EDGES}, got {self.edge!r}")
 
     @property
     def half_length(self) -> int:
@@ -118,20 +111,13 @@ class Decimator(eqx.Module):
         squeeze = ys.ndim == 1
         x = ys[:, None] if squeeze else ys.reshape(ys.shape[0], -1)
         num, half = x.shape[0], self.half_length
-        if self.edge != "hold" and num <= half:
+        if num <= half:
             raise ValueError(
                 f"decimator: {num} samples are too few for a {self.num_taps}-tap filter "
-                f"with reflected edges (need > {half}); use edge='hold' or a higher cutoff"
+                f"with reflected edges (need > {half}); use a higher cutoff"
             )
-        if self.edge == "odd":
-            head = 2 * x[:1] - x[half:0:-1]
-            tail = 2 * x[-1:] - x[-2 : -half - 2 : -1]
-        elif self.edge == "even":
-            head = x[half:0:-1]
-            tail = x[-2 : -half - 2 : -1]
-        else:
-            head = jnp.repeat(x[:1], half, axis=0)
-            tail = jnp.repeat(x[-1:], half, axis=0)
+        head = 2 * x[:1] - x[half:0:-1]
+        tail = 2 * x[-1:] - x[-2 : -half - 2 : -1]
         padded = jnp.concatenate([head, x, tail])  # (T + 2·half, C)
         channels = x.shape[1]
         kernel = jnp.broadcast_to(jnp.asarray(self.taps, dtype=x.dtype), (channels, 1, self.num_taps))

@@ -40,18 +40,22 @@ class SensorNoise(eqx.Module):
     def std(self, ys: Float[Array, "T 6"]) -> Float[Array, "T 6"]:
         return self.relative * jnp.abs(ys) + self.additive
 
+    @classmethod
+    def none(cls) -> SensorNoise:
+        """No noise."""
+        zeros = jnp.zeros(len(CHANNELS))
+        return cls(zeros, zeros)
 
-def sensor_noise(kind: str = "seed", noise_std: dict[str, float] | None = None) -> SensorNoise:
-    """'none', 'seed' (relative), or 'vehicle' (additive, from vehicle.json's noise_std)."""
-    zeros = jnp.zeros(len(CHANNELS))
-    if kind == "none":
-        return SensorNoise(zeros, zeros)
-    if kind == "seed":
-        return SensorNoise(jnp.array([SEED_RELATIVE_NOISE[c] for c in CHANNELS]), zeros)
-    if kind == "vehicle":
-        noise_std = noise_std or {}
-        return SensorNoise(zeros, jnp.array([noise_std.get(c, 0.0) for c in CHANNELS]))
-    raise ValueError(f"noise: unknown kind '{kind}' (none, seed, vehicle)")
+    @classmethod
+    def seed(cls) -> SensorNoise:
+        """The seed's relative noise (`SEED_RELATIVE_NOISE`)."""
+        return cls(jnp.array([SEED_RELATIVE_NOISE[c] for c in CHANNELS]), jnp.zeros(len(CHANNELS)))
+
+    @classmethod
+    def additive_std(cls, noise_std: dict[str, float]) -> SensorNoise:
+        """Additive noise of std ``noise_std[channel]`` (a vehicle file's ``noise_std``; 0 for
+        channels it does not name)."""
+        return cls(jnp.zeros(len(CHANNELS)), jnp.array([noise_std.get(c, 0.0) for c in CHANNELS]))
 
 
 class StiffnessMixtureNoise(eqx.Module):
