@@ -4,13 +4,17 @@ and ``--set FIELD=VALUE`` names."""
 import dataclasses
 
 from vdsbi.inference import (
+    ChannelStandardization,
     FlowMatchingSettings,
+    GlobalStandardization,
     IdentityMap,
     LogitMap,
+    NoStandardization,
     NPEConfig,
     SequentialSettings,
     SplineFlowSettings,
     TrainingSettings,
+    TrajectoryStandardization,
 )
 
 #: The results files store a config flat, under these names: the spline flow's fields as they
@@ -21,6 +25,21 @@ _FMPE_FIELDS = {"fmpe_hidden": "hidden", "fmpe_num_blocks": "num_blocks", "fmpe_
 _COMMON = ("theta_map", "x_standardize")
 _SPLINE_FIELDS = tuple(f.name for f in dataclasses.fields(SplineFlowSettings) if f.name not in _COMMON)
 _THETA_MAPS = {m.name: m for m in (LogitMap(), IdentityMap())}
+#: Yes/no fields the results files store as the words they were written with: {field: (stored
+#: name, {value: word})}.
+_WORDS = {
+    "cosine_decay": ("lr_schedule", {False: "constant", True: "cosine"}),
+    "patience_over_new_data": ("patience_unit", {False: "epochs", True: "new_data"}),
+}
+_X_STANDARDIZE = {
+    s.name: s
+    for s in (
+        ChannelStandardization(),
+        GlobalStandardization(),
+        TrajectoryStandardization(),
+        NoStandardization(),
+    )
+}
 #: Fields of cells run before they were removed from the library, at the value that made them no-ops.
 RETIRED = {
     "retrain_from_scratch": False,
@@ -42,8 +61,11 @@ def flat_config(config: NPEConfig) -> dict:
     out = {k: getattr(spline, k) for k in _SPLINE_FIELDS}
     out.update({k: getattr(other, v) for k, v in _FMPE_FIELDS.items()})
     out.update(estimator="fmpe" if fmpe else "nsf", theta_map=flow.theta_map.name)
-    out["x_standardize"] = flow.x_standardize
-    return {**out, **dataclasses.asdict(config.training), **dataclasses.asdict(config.sequential)}
+    out["x_standardize"] = flow.x_standardize.name
+    out |= dataclasses.asdict(config.training) | dataclasses.asdict(config.sequential)
+    for field, (stored, words) in _WORDS.items():
+        out[stored] = words[out.pop(field)]
+    return out
 
 
 def make_config(**fields) -> NPEConfig:
@@ -52,7 +74,9 @@ def make_config(**fields) -> NPEConfig:
     unknown = set(f) - set(flat_config(NPEConfig()))
     if unknown:
         raise TypeError(f"not config fields: {sorted(unknown)}")
-    common = dict(theta_map=_THETA_MAPS[f["theta_map"]], x_standardize=f["x_standardize"])
+    for field, (stored, words) in _WORDS.items():
+        f[field] = {w: v for v, w in words.items()}[f.pop(stored)]
+    common = dict(theta_map=_THETA_MAPS[f["theta_map"]], x_standardize=_X_STANDARDIZE[f["x_standardize"]])
     if f["estimator"] == "fmpe":
         flow = FlowMatchingSettings(**{v: f[k] for k, v in _FMPE_FIELDS.items()}, **common)
     else:

@@ -24,7 +24,7 @@ import numpy as np
 from _config import flat_config, make_config
 
 from vdsbi.diagnostics import expected_coverage, sbc_ks_pvalues, sbc_ranks
-from vdsbi.inference import IdentifySettings, identify, observation, seed_prior
+from vdsbi.inference import OBSERVATIONS, IdentifySettings, identify, seed_prior
 from vdsbi.simulator import (
     PARAM_NAMES,
     SEED_CHANNELS,
@@ -88,7 +88,7 @@ def main(argv=None):
     }
     overrides = {k: v for k, v in overrides.items() if v is not None}
     configs = {  # each embedding's IdentifySettings default, with the overrides
-        emb: make_config(**{**flat_config(IdentifySettings(embedding=emb).config), **overrides})
+        emb: make_config(**{**flat_config(IdentifySettings(embedding=OBSERVATIONS[emb]).config), **overrides})
         for emb in args.embeddings.split(",")
     }
     results = {
@@ -107,7 +107,7 @@ def main(argv=None):
         settings = IdentifySettings(
             rounds=1,
             sims_per_round=n_sims,
-            embedding=emb,
+            embedding=OBSERVATIONS[emb],
             num_samples=n_post,
             config=configs[emb],
         )
@@ -115,7 +115,7 @@ def main(argv=None):
         posterior, _, state = identify(k_train, simulator, prior, ys_test[0], settings)
         train_s = time.perf_counter() - t0
         # The held-out sets as the estimator sees them (what `identify` does to its observation).
-        x_test = np.asarray(jax.vmap(lambda r: observation(r, u, emb))(ys_test))
+        x_test = np.asarray(jax.vmap(lambda r: OBSERVATIONS[emb](r, u))(ys_test))
         t0 = time.perf_counter()
         keys = jax.random.split(k_rest, n_test)
         sample_one = lambda k, x: posterior.sample(k, n_post, x=x)

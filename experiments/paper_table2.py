@@ -21,11 +21,11 @@ import numpy as np
 
 from vdsbi.api.plots import pairplot
 from vdsbi.inference import (
-    AbstractThetaMap,
+    OBSERVATIONS,
     IdentifySettings,
     Posterior,
+    as_record,
     identify,
-    observation,
     seed_prior,
 )
 from vdsbi.simulator import (
@@ -73,15 +73,6 @@ JAXPR_TRACE_EVENT = "/jax/core/compile/jaxpr_trace_duration"
 def _replaced(settings, **fields):
     """``settings`` with the ``fields`` that are not None replaced."""
     return dataclasses.replace(settings, **{k: v for k, v in fields.items() if v is not None})
-
-
-def _as_json(settings):
-    """A settings dataclass as JSON-ready nested dicts; a θ map by its name."""
-    if isinstance(settings, AbstractThetaMap):
-        return settings.name
-    if dataclasses.is_dataclass(settings):
-        return {f.name: _as_json(getattr(settings, f.name)) for f in dataclasses.fields(settings)}
-    return settings
 
 
 def main(argv=None) -> dict:
@@ -133,10 +124,11 @@ def main(argv=None) -> dict:
     x_o, ok = simulator(k_obs, jnp.asarray(truth, jnp.float32)[None])
     assert bool(ok[0]), "the observation failed to simulate"
     prior = seed_prior(literal=args.literal_prior)
-    settings = IdentifySettings(rounds=rounds, sims_per_round=sims, embedding=args.embedding)
+    settings = IdentifySettings(rounds=rounds, sims_per_round=sims, embedding=OBSERVATIONS[args.embedding])
     if args.truncate is not None:
         settings = dataclasses.replace(settings, truncate=args.truncate)
-    training = {"max_epochs": args.max_epochs, "patience": args.patience, "lr_schedule": args.lr_schedule}
+    cosine = None if args.lr_schedule is None else args.lr_schedule == "cosine"
+    training = {"max_epochs": args.max_epochs, "patience": args.patience, "cosine_decay": cosine}
     if args.quick:
         training.update(max_epochs=15, patience=4)
     config = settings.config
@@ -165,7 +157,7 @@ def main(argv=None) -> dict:
     round_spread, diag_s = [], [0.0]
     inp = simulator.inputs
     u = jnp.stack([inp.steer, inp.torque_front, inp.torque_rear], axis=-1).astype(jnp.float32)
-    x_obs = observation(x_o[0], u, args.embedding)
+    x_obs = settings.embedding(x_o[0], u)
 
     def on_round(state):
         traces.append(dict(traced))
@@ -213,9 +205,9 @@ def main(argv=None) -> dict:
             "literal_prior": args.literal_prior,
             "seed": args.seed,
             "prior": {n: [float(lo[i]), float(hi[i])] for i, n in enumerate(PARAM_NAMES)},
-            "patience_unit": settings.config.sequential.patience_unit,
+            "patience_over_new_data": settings.config.sequential.patience_over_new_data,
             "truncate": settings.truncate,
-            "config": _as_json(settings.npe_config),
+            "config": as_record(settings.npe_config),
         },
         "device": f"{jax.devices()[0].platform}:{jax.devices()[0].device_kind}",
         "load_average_at_start": load_start,

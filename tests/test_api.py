@@ -12,7 +12,7 @@ import pytest
 
 from vdsbi import api
 from vdsbi.api._validate import PROFILE_V0
-from vdsbi.inference import IdentifySettings, identify, seed_prior
+from vdsbi.inference import IdentifySettings, StatisticsMLP, identify, seed_prior
 from vdsbi.io import InputError, read_recording
 from vdsbi.io._errors import SimulationError
 from vdsbi.simulator import CHANNELS, PARAM_NAMES, SEED_TRUE_THETA, default_vehicle, seed_profile
@@ -32,7 +32,7 @@ class _FailingSimulator:
 
 
 def test_identify_raises_simulation_error_when_every_draw_fails(getkey):
-    settings = IdentifySettings(rounds=1, sims_per_round=10, embedding="stats")
+    settings = IdentifySettings(rounds=1, sims_per_round=10, embedding=StatisticsMLP())
     readings = np.zeros((_FailingSimulator.inputs.num_samples, 2))
     with pytest.raises(SimulationError) as info:
         identify(getkey(), _FailingSimulator(), seed_prior(), readings, settings)

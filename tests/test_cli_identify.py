@@ -15,6 +15,7 @@ import pytest
 
 from vdsbi import api
 from vdsbi.cli import main
+from vdsbi.inference import StatisticsMLP
 from vdsbi.simulator import (
     CHANNELS,
     PARAM_NAMES,
@@ -206,7 +207,7 @@ def test_interrupted_run_resumes_to_identical_result(drive, full_run, tmp_path):
             sims=100,
             epochs=3,
             num_samples=200,
-            embedding="stats",
+            embedding=StatisticsMLP(),
             out_dir=out,
             on_round_end=interrupt,
         )

@@ -337,14 +337,14 @@ def test_npe_on_given_simulations_learns_and_checks_shapes(average_epochs, getke
         npe(getkey(), prior, theta[:, :1], x, embedding=IdentityEmbedding(2), config=TINY)
 
 
-@pytest.mark.parametrize("unit", ["new_data", "epochs"])
-def test_later_rounds_wait_for_their_new_data_only(unit, getkey):
-    # "new_data": after a round that stopped early, round r of equal rounds waits
-    # ceil(p / (r + 1)) epochs (at least 2); after one cut off by max_epochs, p. "epochs": p
+@pytest.mark.parametrize("over_new_data", [True, False])
+def test_later_rounds_wait_for_their_new_data_only(over_new_data, getkey):
+    # Over new data: after a round that stopped early, round r of equal rounds waits
+    # ceil(p / (r + 1)) epochs (at least 2); after one cut off by max_epochs, p. Otherwise p
     # epochs in every round. Either way a round stops exactly `patience` epochs after its best
     # one, unless it ran out of epochs.
     prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
-    cfg = _with(TINY, max_epochs=40, patience=6, patience_unit=unit)
+    cfg = _with(TINY, max_epochs=40, patience=6, patience_over_new_data=over_new_data)
     _, state = apt(
         getkey(),
         _gauss_sim,
@@ -357,10 +357,10 @@ def test_later_rounds_wait_for_their_new_data_only(unit, getkey):
     )
     hist = state.history
     for r, h in enumerate(hist):
-        scaled = unit == "new_data" and r > 0 and hist[r - 1]["epochs"] < 40
+        scaled = over_new_data and r > 0 and hist[r - 1]["epochs"] < 40
         assert h["patience"] == (max(2, -(-6 // (r + 1))) if scaled else 6)
         assert h["epochs"] == 40 or h["epochs"] - 1 - h["best_epoch"] == h["patience"]
-    if unit == "new_data":  # the data made some round stop early and the next one scale
+    if over_new_data:  # the data made some round stop early and the next one scale
         assert min(h["patience"] for h in hist) < 6
 
 
@@ -370,16 +370,14 @@ def test_cosine_schedule_runs_its_course_without_recompiling(getkey, monkeypatch
     # next round scales its patience as after an early stop; that round continues the trained
     # flow at the constant rate.
     prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
-    cfg = _with(TINY, max_epochs=4, patience=6, lr_schedule="cosine")
+    cfg = _with(TINY, max_epochs=4, patience=6, cosine_decay=True)
     _counted(monkeypatch, "train_steps", 2)  # one per loss, not one per epoch
     kw = dict(embedding=IdentityEmbedding(2), rounds=2, sims_per_round=160, config=cfg)
     _, state = apt(getkey(), _gauss_sim, prior, jnp.zeros(2), **kw)
     first, second = state.history
     assert first["epochs"] == 4  # patience 6 > 4 epochs: no early stop
     assert second["patience"] == 3  # ceil(6 / 2), not the full 6 of an unconverged round
-    assert (first["lr_schedule"], second["lr_schedule"]) == ("cosine", "constant")
-    with pytest.raises(ValueError, match="lr_schedule"):
-        TrainingSettings(lr_schedule="step")
+    assert (first["cosine_decay"], second["cosine_decay"]) == (True, False)
 
 
 def test_later_rounds_are_capped_in_passes_over_their_new_data(getkey):
@@ -397,14 +395,11 @@ def test_later_rounds_are_capped_in_passes_over_their_new_data(getkey):
         SequentialSettings(later_max_epochs=0)
 
 
-def test_patience_unit_is_checked():
-    with pytest.raises(ValueError, match="patience_unit"):
-        SequentialSettings(patience_unit="steps")
-
-
 def test_config_fields_are_checked():
     with pytest.raises(TypeError, match="theta_map"):
         SplineFlowSettings(theta_map="logit")
+    with pytest.raises(TypeError, match="x_standardize"):
+        SplineFlowSettings(x_standardize="channel")
     with pytest.raises(TypeError, match="flow"):
         NPEConfig(flow=TrainingSettings())
     with pytest.raises(ValueError, match="average_epochs"):
@@ -433,7 +428,7 @@ def test_fit_takes_an_optax_optimizer(getkey):
     assert tree_allclose(default, same, rtol=0, atol=0)
     sgd, info = fit(key, flow, *data, loss, training, optax.sgd(1e-2))
     assert info["epochs"] == 2 and not tree_allclose(sgd, default)
-    cosine = dataclasses.replace(training, lr_schedule="cosine")
+    cosine = dataclasses.replace(training, cosine_decay=True)
     with pytest.raises(ValueError, match="inject_hyperparams"):
         fit(key, flow, *data, loss, cosine, optax.sgd(1e-2))
 

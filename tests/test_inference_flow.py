@@ -8,12 +8,15 @@ import pytest
 
 from vdsbi.inference import (
     BoxPrior,
+    ChannelStandardization,
     ConditionalFlow,
+    GlobalStandardization,
     IdentityEmbedding,
     IdentityMap,
     MLPEmbedding,
     Posterior,
     Standardizer,
+    TrajectoryStandardization,
 )
 
 
@@ -66,10 +69,10 @@ def test_flow_with_time_channel_inputs(getkey):
     # x of shape (T, C) standardised per channel, embedded by an MLP
     t, c = 20, 3
     xs = jax.random.normal(getkey(), (64, t, c)) * jnp.array([1.0, 10.0, 100.0]) + 5.0
-    std = Standardizer.fit(xs, "channel")
+    std = ChannelStandardization().fit(xs)
     assert std.mean.shape == (c,)
     np.testing.assert_allclose(np.asarray(jax.vmap(std)(xs)).reshape(-1, c).std(0), 1.0, rtol=1e-4)
-    assert Standardizer.fit(xs, "global").mean.shape == ()
+    assert GlobalStandardization().fit(xs).mean.shape == ()
     prior = BoxPrior(jnp.zeros(2), jnp.ones(2))
     emb = MLPEmbedding(getkey(), t * c, 8, 16, 1)
     flow = ConditionalFlow(getkey(), prior, emb, (t, c), num_layers=2, hidden=8, x_standardizer=std)
@@ -86,12 +89,12 @@ def test_trajectory_standardisation_exposes_small_deviations(getkey, tmp_path):
     sig = base[None, :, None] + 0.01 * a * jnp.ones((1, t, 1))
     inp = jnp.broadcast_to(jnp.sin(jnp.arange(t) / 5.0)[None, :, None], (n, t, 1))
     xs = jnp.concatenate([sig, inp], -1)
-    std = Standardizer.fit(xs, "trajectory")
+    std = TrajectoryStandardization().fit(xs)
     assert std.mean.shape == std.std.shape == (t, 2)
     z = np.asarray(jax.vmap(std)(xs))
     # the small part is O(1) and carries a: per-channel scaling would leave it at ~3e-4
     np.testing.assert_allclose(z[:, 0, 0], np.asarray(a[:, 0, 0] - a.mean()) / np.asarray(a.std()), atol=1e-2)
-    per_channel = np.asarray(jax.vmap(Standardizer.fit(xs, "channel"))(xs))
+    per_channel = np.asarray(jax.vmap(ChannelStandardization().fit(xs))(xs))
     assert np.std(per_channel[:, 0, 0]) < 1e-3
     # the input channel is kept (per-channel standardised), not zeroed
     np.testing.assert_allclose(z[0, :, 1].std(), 1.0, rtol=1e-3)

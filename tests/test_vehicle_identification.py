@@ -8,7 +8,15 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vdsbi.inference import CNNEmbedding, embedding_from_spec, seed_prior, summary_statistics
+from vdsbi.inference import (
+    CNNEmbedding,
+    StatisticsMLP,
+    TrajectoryCNN,
+    TrajectoryStandardization,
+    embedding_from_spec,
+    seed_prior,
+    summary_statistics,
+)
 
 
 def test_cnn_embedding_any_length_and_reconstructable(getkey):
@@ -109,13 +117,14 @@ def test_seed_prior_is_physical():
 
 
 def test_identify_settings_train_each_embedding_by_its_own_default():
-    from vdsbi.inference import IdentifySettings, NPEConfig, TrainingSettings
+    from vdsbi.inference import IdentifySettings, NPEConfig, TrainingSettings, as_record
+    from vdsbi.io import InputError
 
-    cnn, stats = IdentifySettings(embedding="cnn"), IdentifySettings(embedding="stats")
+    cnn, stats = IdentifySettings(embedding=TrajectoryCNN()), IdentifySettings(embedding=StatisticsMLP())
     # round 1 runs a fixed decaying schedule, shorter for the costly CNN
-    assert cnn.config.training.lr_schedule == stats.config.training.lr_schedule == "cosine"
+    assert cnn.config.training.cosine_decay and stats.config.training.cosine_decay
     assert cnn.config.training.max_epochs < stats.config.training.max_epochs
-    assert cnn.npe_config.flow.x_standardize == "trajectory"
+    assert isinstance(cnn.npe_config.flow.x_standardize, TrajectoryStandardization)
     # the CNN's later rounds are capped (bounded Table II time); the cheap statistics' are not
     assert cnn.config.sequential.later_max_epochs is not None
     assert stats.config.sequential.later_max_epochs is None
@@ -123,7 +132,13 @@ def test_identify_settings_train_each_embedding_by_its_own_default():
     # the CNN's spline interval is wider than the default: base draws past ±3 escaped to the box edges
     assert cnn.config.flow.tail_bound > NPEConfig().flow.tail_bound
     mine = NPEConfig(training=TrainingSettings(max_epochs=7))
-    assert IdentifySettings(embedding="cnn", config=mine).config is mine  # an explicit one is kept
+    assert IdentifySettings(embedding=TrajectoryCNN(), config=mine).config is mine  # an explicit one is kept
+    with pytest.raises(InputError, match="embedding"):
+        IdentifySettings(embedding="cnn")
+    # the run's record names each typed choice
+    assert as_record(stats)["embedding"] == "stats"
+    assert as_record(cnn.npe_config)["flow"]["x_standardize"] == "trajectory"
+    assert as_record(cnn.npe_config)["flow"]["theta_map"] == "logit"
 
 
 @pytest.mark.slow

@@ -196,11 +196,13 @@ def _diagnose(rec, veh, d: Path, name: Path, *, seed: int, quiet: bool, options:
 def _identify(rec, veh, d: Path, name: Path, folder: str, effects, *, budget, seed, progress, say, **kw):
     """One identification of the demo drive into d/folder with identify's default effects and
     `effects` added (as the command diagnose prints), its table in table.txt."""
+    from ..inference import StatisticsMLP
+
     apt = {"rounds": budget.rounds, "sims": budget.sims, "epochs": budget.epochs}
     res = identify(
         rec,
         veh,
-        embedding="stats",
+        embedding=StatisticsMLP(),
         seed=seed,
         add_effects=list(effects),
         out_dir=d / folder,

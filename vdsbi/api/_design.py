@@ -15,7 +15,7 @@ import numpy as np
 
 from ..io import InputError, Recording
 from ..simulator import CHANNELS, PARAM_NAMES, SEED_CHANNELS, Vehicle
-from ._validate import PROFILE_V0, checked_theta, load_vehicle, noise_channels
+from ._validate import PROFILE_V0, checked_theta, load_vehicle, noise_channels, sensor_noise
 
 
 @dataclasses.dataclass
@@ -114,7 +114,9 @@ def design(
     _check_target_and_steps(target, steps)
     th = checked_theta(theta, veh)
     limits = _limits(duration, max_steer, max_drive, max_brake, brake_front_share, speed_window)
-    channels, _ = noise_channels(list(SEED_CHANNELS), noise, veh, source)
+    named = noise
+    noise = sensor_noise(named, veh, source)
+    channels, _ = noise_channels(list(SEED_CHANNELS), noise, source)
     with jax.enable_x64(True):
         import jax.numpy as jnp
 
@@ -122,12 +124,12 @@ def design(
         from ..simulator import make_model
 
         model, th = make_model(veh), jnp.asarray(th, dtype=float)
-        problem = _problem(model, th, limits, target, channels, noise, veh.noise_std)
+        problem = _problem(model, th, limits, target, channels, noise)
         start = Maneuver.seed_like(limits)
         res = _optimise(problem, start, steps, learning_rate, log or (lambda s: None))
         designed, v0 = res.maneuver.inputs(limits), float(res.maneuver.initial_speed(limits))
-        fisher = dict(channels=channels, noise=noise, noise_std=veh.noise_std)
-        bounds = _bounds(model, th, limits, start, res.maneuver, designed, v0, fisher, target)
+        fisher = dict(channels=channels, noise=noise)
+        bounds = _bounds(model, th, limits, start, res.maneuver, designed, v0, fisher, target, named)
         rec = _recording(model, th, designed, v0)
         described = res.maneuver.describe(limits)
     return DesignReport(bounds, _info(target, described, limits, steps, res), rec)
@@ -141,7 +143,7 @@ def _check_target_and_steps(target: str, steps: int) -> None:
         raise InputError("--steps", "value", "must be >= 0")
 
 
-def _problem(model, theta, limits, target: str, channels, noise: str, noise_std_map):
+def _problem(model, theta, limits, target: str, channels, noise):
     """`vdsbi.diagnostics.design_problem` for `target` ("D": log det F, no single parameter)."""
     from ..diagnostics import design_problem
 
@@ -152,16 +154,17 @@ def _problem(model, theta, limits, target: str, channels, noise: str, noise_std_
         target=None if target == "D" else target,
         channels=channels,
         noise=noise,
-        noise_std_map=noise_std_map,
     )
 
 
-def _bounds(model, theta, limits, start, maneuver, designed, v0: float, fisher: dict, target: str) -> dict:
-    """bounds.json: the Fisher reports of `_reports`, the improvement per parameter
-    (CRB std before / after) and the designed maneuver's limits check."""
+def _bounds(
+    model, theta, limits, start, maneuver, designed, v0: float, fisher: dict, target: str, noise: str
+) -> dict:
+    """bounds.json (`noise`: the noise model's name): the Fisher reports of `_reports`, the
+    improvement per parameter (CRB std before / after) and the designed maneuver's limits check."""
     from ..diagnostics import check_limits
 
-    bounds = {"target": target, "noise": fisher["noise"], "channels": fisher["channels"]}
+    bounds = {"target": target, "noise": noise, "channels": fisher["channels"]}
     bounds |= _reports(model, theta, limits, start, maneuver, fisher)
     before, after = bounds["before"]["crb_std"], bounds["after"]["crb_std"]
     bounds["improvement"] = {n: before[n] / after[n] for n in before}

@@ -9,9 +9,12 @@ import json
 import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ..inference import AbstractObservation
 
 from ..diagnostics import fit_likelihood, screened_sample
 from ..io import InputError, SimulationError
@@ -47,7 +50,7 @@ def identify(
     *,
     rounds: int = 2,
     sims: int = 1000,
-    embedding: str = "stats",
+    embedding: AbstractObservation | None = None,
     seed: int = 0,
     out_dir: str | os.PathLike | None = None,
     resume: bool = False,
@@ -85,7 +88,7 @@ def identify(
             (recordings of one car, identified jointly, each window from its own state).
         vehicle: path (.json/.yaml) or a `vdsbi.simulator.Vehicle`.
         rounds, sims: APT rounds and simulations per round.
-        embedding: "stats" or "cnn".
+        embedding: `vdsbi.inference.StatisticsMLP()` (None, the default) or `TrajectoryCNN()`.
         seed: the only source of randomness; same seed, same machine → identical samples.
         out_dir: write posterior.json, samples.csv, plots, report.html, estimator.npz and the
             per-round checkpoint here (None: write nothing).
@@ -219,8 +222,9 @@ def _load(recording, vehicle, rate: float):
 
 def _settings(rounds, sims, embedding, epochs, num_samples):
     """`IdentifySettings` (which checks them) with `epochs` as the training's epoch limit."""
-    from ..inference import IdentifySettings
+    from ..inference import IdentifySettings, StatisticsMLP
 
+    embedding = StatisticsMLP() if embedding is None else embedding
     base = IdentifySettings(embedding=embedding)  # the embedding's own training default
     cfg = base.config
     if epochs is not None:
@@ -279,10 +283,12 @@ def _box(veh, effects, priors, grip: float | None) -> Box:
 
 def _run_info(recs, prob: Problem, settings, seed: int, effects, box: Box) -> dict[str, Any]:
     """What run.json records: a checkpoint resumes only a run with the same."""
+    from ..inference import as_record
+
     return {
         "recording": " + ".join(str(r.source) for r in recs),
         "seed": int(seed),
-        "settings": json.loads(json.dumps(dataclasses.asdict(settings), default=str)),
+        "settings": json.loads(json.dumps(as_record(settings), default=str)),
         "longitudinal": prob.longitudinal,
         "windows": [[w.t0, w.t1, w.role] for w in prob.windows],
         "channels": list(prob.channels),

@@ -13,7 +13,15 @@ from typing import Any
 from ..io import InputError, Recording
 from ..problem import make_problem
 from ..simulator import CHANNELS, SEED_CHANNELS, Inputs, Vehicle
-from ._validate import PROFILE_V0, checked_theta, checked_v0, first_speed, load_vehicle, noise_channels
+from ._validate import (
+    PROFILE_V0,
+    checked_theta,
+    checked_v0,
+    first_speed,
+    load_vehicle,
+    noise_channels,
+    sensor_noise,
+)
 
 
 @dataclasses.dataclass
@@ -84,10 +92,10 @@ def observability(
     rec, problem, mode, inputs = _maneuver(maneuver, veh)
     channels = _checked_channels(channels, problem)
     v0 = checked_v0(_default_v0(rec, veh) if v0 is None else v0)
-    channels, dropped = noise_channels(channels, noise, veh, source)
+    channels, dropped = noise_channels(channels, sensor_noise(noise, veh, source), source)
     th = checked_theta(theta, veh)
     model, params = _model(veh, effects, effect_params, mode)
-    rep = _report(model, th, inputs, v0, params, channels, noise, veh, problem)
+    rep = _report(model, th, inputs, v0, params, channels, sensor_noise(noise, veh, source), veh, problem)
     rep["maneuver"] = label or (rec.source if rec is not None else "inputs")
     rep["v0"] = v0
     rep["noise"] = noise
@@ -122,7 +130,7 @@ def _default_v0(rec: Recording | None, vehicle: Vehicle) -> float:
     return first_speed(rec, vehicle) if rec is not None else PROFILE_V0
 
 
-def _report(model, theta, inputs, v0, params, channels, noise: str, vehicle: Vehicle, problem) -> dict:
+def _report(model, theta, inputs, v0, params, channels, noise, vehicle: Vehicle, problem) -> dict:
     """`fisher_report` of the maneuver in float64, with a recording's identifiability."""
     import jax
 
@@ -139,7 +147,6 @@ def _report(model, theta, inputs, v0, params, channels, noise: str, vehicle: Veh
             tuple(jnp.asarray(p, dtype=float) for p in params),
             channels=channels,
             noise=noise,
-            noise_std=vehicle.noise_std,
         )
         rep = fisher_report(fisher)
         if problem is not None:

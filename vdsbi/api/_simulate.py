@@ -14,20 +14,12 @@ from ..simulator import (
     CHANNELS,
     AbstractVehicleModel,
     Inputs,
-    SensorNoise,
     SpeedDriven,
     TorqueDriven,
     Vehicle,
     model_class,
 )
-from ._validate import PROFILE_V0, checked_theta, checked_v0, first_speed, load_vehicle
-
-#: `simulate`'s ``noise`` names: the sensor noise each adds, from the vehicle file's noise_std.
-NOISE = {
-    "none": lambda noise_std: None,
-    "seed": lambda noise_std: SensorNoise.seed(),
-    "vehicle": SensorNoise.additive_std,
-}
+from ._validate import PROFILE_V0, checked_theta, checked_v0, first_speed, load_vehicle, sensor_noise
 
 
 @dataclasses.dataclass
@@ -122,11 +114,7 @@ def simulate(
     if v0 is None and rec is None:
         raise InputError("--v0", "v0", "give an initial speed for bare inputs")
     v0 = first_speed(rec, veh) if v0 is None else checked_v0(v0)
-    if noise not in NOISE:
-        raise InputError("--noise", noise, f"must be one of {', '.join(NOISE)}")
-    if noise == "vehicle" and not veh.noise_std:
-        raise InputError(source, "noise_std", "--noise vehicle needs noise_std in the vehicle file")
-    add_noise = NOISE[noise](veh.noise_std or {})
+    add_noise = sensor_noise(noise, veh, source)
     lateral0 = None if rec is None else _lateral0(rec, th, veh, v0)
     ys, ok = solve_one(
         th,

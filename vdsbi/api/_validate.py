@@ -11,7 +11,15 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from ..io import InputError, read_vehicle
-from ..simulator import PARAM_NAMES, SEED_TRUE_THETA, Vehicle, check_theta, default_vehicle
+from ..simulator import (
+    CHANNELS,
+    PARAM_NAMES,
+    SEED_TRUE_THETA,
+    SensorNoise,
+    Vehicle,
+    check_theta,
+    default_vehicle,
+)
 
 #: Initial speed on a built-in profile, m/s (the middle of the seed's U[10, 11]).
 PROFILE_V0 = 10.5
@@ -87,22 +95,47 @@ def first_speed(rec, vehicle: Vehicle) -> float:
     return v0
 
 
-def noise_channels(
-    channels: Sequence[str], noise: str, vehicle: Vehicle, source: str
-) -> tuple[list[str], list[str]]:
-    """(channels kept, channels dropped): with "vehicle" noise, those without a noise_std go.
+#: The sensor-noise names `simulate`, `observability` and `design` take, and the noise each
+#: makes from a vehicle file's noise_std (None: none).
+NOISE = {
+    "none": lambda noise_std: None,
+    "seed": lambda noise_std: SensorNoise.seed(),
+    "vehicle": SensorNoise.additive_std,
+}
+
+
+def sensor_noise(noise: str, vehicle: Vehicle, source: str) -> SensorNoise | None:
+    """The sensor noise `NOISE` names, for `vehicle`.
 
     Raises:
-        InputError: no channel is left.
+        InputError: an unknown name, or a noise that needs the vehicle's noise_std and finds none.
     """
-    if noise != "vehicle":
-        return list(channels), []
-    dropped = [c for c in channels if not vehicle.noise_std.get(c, 0.0) > 0]
+    if noise not in NOISE:
+        raise InputError("--noise", noise, f"must be one of {', '.join(NOISE)}")
+    made = NOISE[noise](vehicle.noise_std or {})
+    if made is not None and not (np.any(made.relative > 0) or np.any(made.additive > 0)):
+        raise InputError(source, "noise_std", f"--noise {noise} needs noise_std in the vehicle file")
+    return made
+
+
+def noise_channels(
+    channels: Sequence[str], noise: SensorNoise | None, source: str
+) -> tuple[list[str], list[str]]:
+    """(channels kept, channels dropped): channels that `noise` leaves noise-free go (they would
+    carry infinite information), e.g. those the vehicle file gives no noise_std.
+
+    Raises:
+        InputError: no noise model, or no channel is left.
+    """
+    if noise is None:
+        raise InputError("--noise", "none", "information needs a noise model: seed or vehicle")
+    rel, add = np.asarray(noise.relative), np.asarray(noise.additive)
+    dropped = [c for c in channels if not (rel[CHANNELS.index(c)] > 0 or add[CHANNELS.index(c)] > 0)]
     kept = [c for c in channels if c not in dropped]
     if not kept:
         raise InputError(
             source,
             "noise_std",
-            f"--noise vehicle needs a positive noise_std for at least one measured channel of {dropped}",
+            f"the noise model needs a positive noise_std for at least one measured channel of {dropped}",
         )
     return kept, dropped

@@ -112,13 +112,15 @@ def _add_validation(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from ..inference import OBSERVATIONS
+
     quiet = args.quiet
     res = api.identify(
         args.recording if len(args.recording) > 1 else args.recording[0],
         args.vehicle,
         rounds=args.rounds,
         sims=args.sims,
-        embedding=args.embedding,
+        embedding=OBSERVATIONS[args.embedding],
         seed=args.seed,
         out_dir=args.out,
         resume=args.resume,

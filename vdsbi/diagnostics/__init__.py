@@ -19,10 +19,10 @@ from ._design import (
 )
 from ._fisher import (
     Fisher as Fisher,
+    channel_noise as channel_noise,
     fisher_from_jacobian as fisher_from_jacobian,
     fisher_information as fisher_information,
     model_fisher as model_fisher,
-    noise_model as noise_model,
     noise_std as noise_std,
     param_names as param_names,
     score_fisher_mc as score_fisher_mc,

@@ -29,9 +29,10 @@ from ..simulator import (
     AbstractSolver,
     AbstractVehicleModel,
     Inputs,
+    SensorNoise,
     solve,
 )
-from ._fisher import noise_model, scaled_fisher
+from ._fisher import channel_noise, scaled_fisher
 from ._maneuver import Limits, Maneuver
 
 _AY = CHANNELS.index("ay")
@@ -134,15 +135,14 @@ def design_problem(
     *,
     target: str | None = "C_kappa_r",
     channels=SEED_CHANNELS,
-    noise: str = "seed",
-    noise_std_map=None,
+    noise: SensorNoise | None = None,
     solver: AbstractSolver = RK4(dt=0.005),
     penalty_weight: float = 1e3,
 ) -> DesignProblem:
     """Build a `DesignProblem`; `target=None` means D-optimal (log det F)."""
     if target is not None and target not in PARAM_NAMES:
         raise ValueError(f"design: unknown target '{target}' (one of {PARAM_NAMES} or None)")
-    rel, add = noise_model(noise, channels, noise_std_map)
+    rel, add = channel_noise(noise, channels)
     return DesignProblem(
         model=model,
         theta=jnp.asarray(theta, dtype=float),

@@ -23,7 +23,7 @@ physical units.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 import equinox as eqx
@@ -38,10 +38,10 @@ from ..simulator import (
     PARAM_NAMES,
     RK4,
     SEED_CHANNELS,
-    SEED_RELATIVE_NOISE,
     AbstractSolver,
     AbstractVehicleModel,
     Inputs,
+    SensorNoise,
     solve,
 )
 
@@ -173,27 +173,18 @@ def _split(model: AbstractVehicleModel, flat):
     return theta, tuple(out)
 
 
-def noise_model(
-    kind: str, channels: Sequence[str], noise_std: Mapping[str, float] | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """(relative, additive) stds for `channels`: 'seed' (the seed's 10 %/5 % relative noise) or
-    'vehicle' (additive, vehicle.json's noise_std). A channel with zero noise in both is
-    rejected: it would carry infinite information."""
-    if kind == "seed":
-        rel = np.array([SEED_RELATIVE_NOISE[c] for c in channels])
-        add = np.zeros(len(channels))
-    elif kind == "vehicle":
-        noise_std = dict(noise_std or {})
-        missing = [c for c in channels if not noise_std.get(c, 0.0) > 0]
-        if missing:
-            raise ValueError(
-                f"noise: vehicle noise_std has no positive std for channel(s) {missing}; "
-                "give them in vehicle.json or leave them out of the channels"
-            )
-        rel = np.zeros(len(channels))
-        add = np.array([float(noise_std[c]) for c in channels])
-    else:
-        raise ValueError(f"noise: unknown kind '{kind}' (seed, vehicle)")
+def channel_noise(noise: SensorNoise | None, channels: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(relative, additive) stds of `noise` (None: `SensorNoise.seed()`) for `channels`. A channel
+    with zero noise in both is rejected: it would carry infinite information."""
+    noise = SensorNoise.seed() if noise is None else noise
+    idx = [CHANNELS.index(c) for c in channels]
+    rel, add = np.asarray(noise.relative, float)[idx], np.asarray(noise.additive, float)[idx]
+    silent = [c for c, r, s in zip(channels, rel, add) if not (r > 0 or s > 0)]
+    if silent:
+        raise ValueError(
+            f"noise: no noise on channel(s) {silent} (they would carry infinite information); "
+            "give them a noise_std in vehicle.json or leave them out of the channels"
+        )
     return rel, add
 
 
@@ -244,8 +235,7 @@ def model_fisher(
     effect_params: tuple = (),
     *,
     channels: Sequence[str] = SEED_CHANNELS,
-    noise: str = "seed",
-    noise_std: Mapping[str, float] | None = None,
+    noise: SensorNoise | None = None,
     floor_fraction: float = FLOOR_FRACTION,
     solver: AbstractSolver = RK4(),
 ) -> Fisher:
@@ -260,13 +250,12 @@ def model_fisher(
         v0: initial speed, m/s.
         effect_params: one (P_e,) vector per enabled effect.
         channels: measured channels.
-        noise: 'seed' or 'vehicle' (see `noise_model`).
-        noise_std: vehicle.json's additive stds, for noise='vehicle'.
+        noise: the sensor noise (default: the seed's relative noise, `SensorNoise.seed`).
         floor_fraction: relative-noise floor (see `noise_std`).
         solver: integration settings.
     """
     idx = jnp.asarray([CHANNELS.index(c) for c in channels])
-    rel, add = noise_model(noise, channels, noise_std)
+    rel, add = channel_noise(noise, channels)
     flat = jnp.concatenate(
         [jnp.asarray(theta, dtype=float)] + [jnp.asarray(p, dtype=float) for p in effect_params]
     )

@@ -10,6 +10,7 @@ from ._config import (
     SequentialSettings as SequentialSettings,
     SplineFlowSettings as SplineFlowSettings,
     TrainingSettings as TrainingSettings,
+    as_record as as_record,
 )
 from ._embeddings import (
     AbstractEmbedding as AbstractEmbedding,
@@ -34,6 +35,12 @@ from ._loss import (
     leak_penalty as leak_penalty,
 )
 from ._npe import npe as npe
+from ._observation import (
+    OBSERVATIONS as OBSERVATIONS,
+    AbstractObservation as AbstractObservation,
+    StatisticsMLP as StatisticsMLP,
+    TrajectoryCNN as TrajectoryCNN,
+)
 from ._posterior import Posterior as Posterior
 from ._prior import BoxPrior as BoxPrior
 from ._sharding import (
@@ -47,7 +54,14 @@ from ._spline import (
     rq_spline_forward as rq_spline_forward,
     rq_spline_inverse as rq_spline_inverse,
 )
-from ._standardize import Standardizer as Standardizer
+from ._standardize import (
+    AbstractStandardization as AbstractStandardization,
+    ChannelStandardization as ChannelStandardization,
+    GlobalStandardization as GlobalStandardization,
+    NoStandardization as NoStandardization,
+    Standardizer as Standardizer,
+    TrajectoryStandardization as TrajectoryStandardization,
+)
 from ._summaries import DEFAULT_LAGS as DEFAULT_LAGS, summary_statistics as summary_statistics
 from ._theta_map import (
     AbstractThetaMap as AbstractThetaMap,
@@ -66,8 +80,6 @@ from ._train import (
 from ._vehicle import (
     IdentifySettings as IdentifySettings,
     identify as identify,
-    make_embedding as make_embedding,
-    observation as observation,
     seed_prior as seed_prior,
 )
 from ._windowed import identify_problem as identify_problem, input_channels as input_channels

@@ -226,10 +226,10 @@ def _train_round(
     if fresh:
         flow = build_flow(k_init, problem.prior, problem.embedding, theta[~is_val], x[~is_val], config.flow)
         training = dataclasses.replace(config.training, patience=patience)
-    else:  # see TrainingSettings.lr_schedule
+    else:  # see TrainingSettings.cosine_decay
         max_epochs = _later_max_epochs(config.training, seq, round_ids, is_val, r)
         training = dataclasses.replace(
-            config.training, max_epochs=max_epochs, patience=patience, lr_schedule="constant"
+            config.training, max_epochs=max_epochs, patience=patience, cosine_decay=False
         )
     if r == 0 or problem.truncate:
         loss = first_round_loss(config.flow)
@@ -253,7 +253,7 @@ def _train_round(
         round_index=r,
         mesh=problem.mesh,
     )
-    info = {"loss": type(loss).__name__, "patience": patience, "lr_schedule": training.lr_schedule}
+    info = {"loss": type(loss).__name__, "patience": patience, "cosine_decay": training.cosine_decay}
     return flow, {**finfo, **info, "max_epochs": training.max_epochs}
 
 
@@ -268,7 +268,7 @@ def _round_patience(
     r: int,
     previous: dict | None,
 ) -> int:
-    """Early-stopping patience in epochs for round ``r`` (see ``SequentialSettings.patience_unit``).
+    """Early-stopping patience in epochs for round ``r`` (see ``SequentialSettings.patience_over_new_data``).
 
     A flow carried over from a previous round that stopped early has already fitted the older
     draws; how many updates it needs to take in a round's new draws scales with their number,
@@ -279,9 +279,9 @@ def _round_patience(
     """
     # a decaying schedule that ran its course ended on small steps: converged by design
     ran_out = previous is not None and previous["epochs"] >= previous.get("max_epochs", training.max_epochs)
-    decayed = previous is not None and previous.get("lr_schedule", "constant") != "constant"
+    decayed = previous is not None and previous.get("cosine_decay", False)
     converged = previous is not None and (not ran_out or decayed)
-    if seq.patience_unit == "epochs" or not converged:
+    if not seq.patience_over_new_data or not converged:
         return training.patience
     num_new, num_all = _new_and_all(round_ids, is_val, r)
     scaled = math.ceil(training.patience * num_new / num_all)

@@ -15,7 +15,7 @@ from ._flow import ConditionalFlow
 from ._flow_matching import FlowMatchingEstimator, FlowMatchingLoss
 from ._loss import MaximumLikelihoodLoss
 from ._prior import BoxPrior
-from ._standardize import Standardizer
+from ._standardize import ChannelStandardization
 
 
 def build_flow(
@@ -29,10 +29,10 @@ def build_flow(
     """A fresh estimator of ``settings``' kind whose θ (in the space of ``settings.theta_map``)
     and x standardisations are fitted on ``theta``/``x``."""
     z, _ = jax.vmap(lambda t: settings.theta_map.forward(prior, t))(jnp.asarray(theta))
-    x_standardizer = Standardizer.fit(jnp.asarray(x), settings.x_standardize)
+    x_standardizer = settings.x_standardize.fit(jnp.asarray(x))
     # data-dependent initialisation of the embedding (a fixed subset bounds the cost)
     embedding = embedding.calibrate(jax.vmap(x_standardizer)(jnp.asarray(x[:2048])))
-    theta_standardizer = Standardizer.fit(z, "channel")
+    theta_standardizer = ChannelStandardization().fit(z)
 
     parts = (prior, embedding, x.shape[1:], settings, theta_standardizer, x_standardizer)
     return _init_compiled(key, parts)

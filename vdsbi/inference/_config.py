@@ -4,18 +4,19 @@ Defaults follow ``sbi``'s NSF / SNPE-C.
 """
 
 import dataclasses
-from typing import Literal
+from typing import Any
 
+import equinox as eqx
+
+from ._standardize import AbstractStandardization, ChannelStandardization
 from ._theta_map import AbstractThetaMap, LogitMap
-
-_X_STANDARDIZE = ("channel", "global", "trajectory", "none")
 
 
 def _check_common(settings) -> None:
     if not isinstance(settings.theta_map, AbstractThetaMap):
         raise TypeError(f"theta_map must be a LogitMap or an IdentityMap, got {settings.theta_map!r}")
-    if settings.x_standardize not in _X_STANDARDIZE:
-        raise ValueError(f"x_standardize must be one of {_X_STANDARDIZE}, got {settings.x_standardize!r}")
+    if not isinstance(settings.x_standardize, AbstractStandardization):
+        raise TypeError(f"x_standardize must be an AbstractStandardization, got {settings.x_standardize!r}")
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -35,9 +36,10 @@ class SplineFlowSettings:
         theta_map: `LogitMap` (default: the flow lives on the logit of the box, a bijection) or
             `IdentityMap` (on θ itself, as sbi; density cut at the box without renormalising,
             samples by rejection).
-        x_standardize: ``"channel"`` (statistics over all axes but the last), ``"global"``,
-            ``"trajectory"`` (minus the mean trajectory, per-channel scale; see `Standardizer.fit`)
-            or ``"none"``.
+        x_standardize: how x's standardisation is fitted: `ChannelStandardization` (default:
+            statistics over all axes but the last), `GlobalStandardization`,
+            `TrajectoryStandardization` (minus the mean trajectory, per-channel scale) or
+            `NoStandardization`.
     """
 
     num_layers: int = 5
@@ -48,7 +50,7 @@ class SplineFlowSettings:
     use_lu: bool = True
     context_gating: bool = False
     theta_map: AbstractThetaMap = LogitMap()
-    x_standardize: str = "channel"
+    x_standardize: AbstractStandardization = ChannelStandardization()
 
     def __post_init__(self):
         _check_common(self)
@@ -69,7 +71,7 @@ class FlowMatchingSettings:
     num_blocks: int = 3
     ode_steps: int = 10
     theta_map: AbstractThetaMap = LogitMap()
-    x_standardize: str = "channel"
+    x_standardize: AbstractStandardization = ChannelStandardization()
 
     def __post_init__(self):
         _check_common(self)
@@ -84,10 +86,10 @@ class TrainingSettings:
         learning_rate, weight_decay: AdamW.
         clip_norm: global-norm gradient clipping.
         max_epochs, patience: early stopping on validation loss; best weights are restored.
-        lr_schedule: ``"constant"`` (default) or ``"cosine"``: a round that trains a fresh flow
-            decays its learning rate per epoch as ``lr·(1 + cos(π·epoch/max_epochs))/2``, so
+        cosine_decay: False (default): a constant learning rate. True: a round that trains a
+            fresh flow decays it per epoch as ``lr·(1 + cos(π·epoch/max_epochs))/2``, so
             unless stopped early it ends on small steps after a fixed budget instead of at a
-            noisy early stop, and counts as converged for ``patience_unit="new_data"``. Rounds
+            noisy early stop, and counts as converged for ``patience_over_new_data``. Rounds
             that continue a trained flow keep the constant rate and early stopping (a cosine
             there would run every later round to its end).
         average_epochs: 0 (default) or the time constant, in epochs, of an exponential moving
@@ -101,15 +103,13 @@ class TrainingSettings:
     clip_norm: float = 5.0
     max_epochs: int = 1000
     patience: int = 20
-    lr_schedule: Literal["constant", "cosine"] = "constant"
+    cosine_decay: bool = False
     average_epochs: float = 0.0
     validation_fraction: float = 0.1
 
     def __post_init__(self):
         if not 0.0 < self.validation_fraction < 1.0:
             raise ValueError("validation_fraction must be in (0, 1)")
-        if self.lr_schedule not in ("constant", "cosine"):
-            raise ValueError(f"lr_schedule must be 'constant' or 'cosine', got {self.lr_schedule!r}")
         if self.average_epochs < 0:
             raise ValueError(f"average_epochs must be >= 0, got {self.average_epochs}")
 
@@ -119,12 +119,12 @@ class SequentialSettings:
     """Rounds after the first (`apt`): their training schedule, APT's loss and TSNPE's region.
 
     Attributes:
-        patience_unit: what ``patience`` counts in a round that continues a trained flow.
-            ``"epochs"``: epochs over all of a round's training data (sbi's rule).
-            ``"new_data"`` (default): examples seen, in passes over the round's NEW training
+        patience_over_new_data: what ``patience`` counts in a round that continues a trained
+            flow. True (default): examples seen, in passes over the round's NEW training
             simulations, i.e. ``ceil(patience * new / all)`` epochs, at least 2; with equal
-            rounds, round ``r`` (from 0) waits ``ceil(patience / (r + 1))`` epochs. The same as
-            ``"epochs"`` in round 1, for NPE, and after a round that ran out of ``max_epochs``.
+            rounds, round ``r`` (from 0) waits ``ceil(patience / (r + 1))`` epochs. False:
+            epochs over all of a round's training data (sbi's rule). The two agree in round 1,
+            for NPE, and after a round that ran out of ``max_epochs``.
         later_max_epochs: opt-in cap for rounds that continue a trained flow, in passes over the
             round's NEW training simulations: ``round(later_max_epochs * new / all)`` epochs, at
             least 2 and at most ``max_epochs``. Such an epoch costs in proportion to all the
@@ -145,7 +145,7 @@ class SequentialSettings:
         truncation_samples: posterior samples used to locate the HPD threshold.
     """
 
-    patience_unit: Literal["epochs", "new_data"] = "new_data"
+    patience_over_new_data: bool = True
     later_max_epochs: int | None = None
     num_atoms: int = 10
     leak_weight: float = 0.0
@@ -155,8 +155,6 @@ class SequentialSettings:
     truncation_samples: int = 10_000
 
     def __post_init__(self):
-        if self.patience_unit not in ("epochs", "new_data"):
-            raise ValueError(f"patience_unit must be 'epochs' or 'new_data', got {self.patience_unit!r}")
         if self.later_max_epochs is not None and self.later_max_epochs < 1:
             raise ValueError(f"later_max_epochs must be >= 1 or None, got {self.later_max_epochs}")
         if self.leak_weight < 0:
@@ -187,3 +185,13 @@ class NPEConfig:
     def __post_init__(self):
         if not isinstance(self.flow, (SplineFlowSettings, FlowMatchingSettings)):
             raise TypeError(f"flow must be SplineFlowSettings or FlowMatchingSettings, got {self.flow!r}")
+
+
+def as_record(settings: Any) -> Any:
+    """Settings as JSON-ready nested dicts, a typed choice (a θ map, a standardisation, an
+    observation) by its ``name``."""
+    if isinstance(settings, eqx.Module) and isinstance(getattr(type(settings), "name", None), str):
+        return settings.name
+    if dataclasses.is_dataclass(settings):
+        return {f.name: as_record(getattr(settings, f.name)) for f in dataclasses.fields(settings)}
+    return settings

@@ -21,13 +21,15 @@ from ._sharding import data_mesh, replicate, stack_batches
 def make_optimizer(training: TrainingSettings) -> optax.GradientTransformation:
     """``clip_by_global_norm`` then AdamW, from ``training``'s settings.
 
-    With ``lr_schedule="cosine"`` the learning rate is an entry of the optimiser state
+    With ``cosine_decay`` the learning rate is an entry of the optimiser state
     (``optax.inject_hyperparams``) that `fit` sets every epoch, so a schedule never recompiles
     the step. The same settings give the same object, so repeated fits reuse the compiled step.
     """
-    scheduled = training.lr_schedule != "constant"
     return _optimizer(
-        float(training.learning_rate), float(training.weight_decay), float(training.clip_norm), scheduled
+        float(training.learning_rate),
+        float(training.weight_decay),
+        float(training.clip_norm),
+        bool(training.cosine_decay),
     )
 
 
@@ -40,13 +42,9 @@ def _optimizer(learning_rate: float, weight_decay: float, clip_norm: float, sche
     )
 
 
-def epoch_learning_rate(learning_rate: float, schedule: str, epoch: int, max_epochs: int) -> float:
-    """The learning rate of ``epoch``: constant, or ``"cosine"``: ``lr·(1 + cos(π·epoch/max_epochs))/2``."""
-    if schedule == "cosine":
-        return learning_rate * 0.5 * (1.0 + math.cos(math.pi * epoch / max_epochs))
-    if schedule != "constant":
-        raise ValueError(f"lr_schedule must be 'constant' or 'cosine', got {schedule!r}")
-    return learning_rate
+def cosine_learning_rate(learning_rate: float, epoch: int, max_epochs: int) -> float:
+    """The learning rate of ``epoch`` under cosine decay: ``lr·(1 + cos(π·epoch/max_epochs))/2``."""
+    return learning_rate * 0.5 * (1.0 + math.cos(math.pi * epoch / max_epochs))
 
 
 def _set_learning_rate(opt_state, value: float):
@@ -247,9 +245,9 @@ def _validation_loss(flow, val_batches: list, key: PRNGKeyArray, loss: AbstractL
 
 def _scheduled(state, training: TrainingSettings, epoch: int):
     """``state`` with the optimiser's learning rate set for ``epoch`` (as is without a schedule)."""
-    if training.lr_schedule == "constant":
+    if not training.cosine_decay:
         return state
-    lr = epoch_learning_rate(training.learning_rate, training.lr_schedule, epoch, training.max_epochs)
+    lr = cosine_learning_rate(training.learning_rate, epoch, training.max_epochs)
     return (state[0], _set_learning_rate(state[1], lr), state[2])
 
 
@@ -301,15 +299,15 @@ def fit(
     """Train ``flow`` on ``theta``/``x`` (host arrays); return the best-validation flow and an info dict.
 
     ``training`` gives the batch size, epochs, patience, learning-rate schedule and weight
-    averaging; ``optimizer`` defaults to ``make_optimizer(training)`` (a schedule other than
-    ``"constant"`` needs its learning rate injected, ``optax.inject_hyperparams``).
+    averaging; ``optimizer`` defaults to ``make_optimizer(training)`` (``cosine_decay`` needs
+    its learning rate injected, ``optax.inject_hyperparams``).
 
     Batches have a fixed size (ragged last batch dropped), a multiple of the device count; the
     batch axis is sharded over ``mesh`` and the model is replicated. Steps run in compiled
     blocks of exactly ``steps_per_call`` (a ``lax.scan``; the last block of an epoch padded with
     masked no-op steps), so per-step Python dispatch is amortised and the loop is compiled once
-    per loss and batch size, not once per data size. ``lr_schedule`` (see
-    `epoch_learning_rate`) sets the learning rate per epoch over ``max_epochs``.
+    per loss and batch size, not once per data size. ``cosine_decay`` (see
+    `cosine_learning_rate`) sets the learning rate per epoch over ``max_epochs``.
     ``average_epochs`` > 0: validation, early stopping and the returned flow use an exponential
     moving average of the weights with a time constant of that many epochs, started from
     ``flow`` (it damps the SGD noise a short, early-stopped round leaves in the weights).

@@ -12,35 +12,10 @@ from ..io import InputError, SimulationError
 from ..simulator import PARAM_NAMES, StochasticSimulator
 from ._apt import apt
 from ._apt_state import APTState
-from ._cnn import CNNEmbedding
-from ._config import NPEConfig, SequentialSettings, SplineFlowSettings, TrainingSettings
-from ._embeddings import MLPEmbedding
+from ._config import NPEConfig
+from ._observation import AbstractObservation, TrajectoryCNN
 from ._posterior import Posterior
 from ._prior import BoxPrior
-from ._summaries import summary_statistics
-
-# Round 1 (a fresh flow) runs a fixed cosine schedule, later rounds the constant rate with
-# early stopping: with a constant rate round 1's early stop moved with float rounding and left
-# the amortised posterior overconfident. The epoch counts are the longest whose amortised
-# posterior passes SBC (`benchmarks/summaries.py`); longer training is overconfident.
-#: Training for the statistics' MLP.
-STATS_CONFIG = NPEConfig(
-    training=TrainingSettings(
-        batch_size=256, learning_rate=1e-3, max_epochs=30, patience=6, lr_schedule="cosine"
-    )
-)
-#: Training for the CNN. `later_max_epochs` caps each later round at 30 passes over its new
-#: simulations, which bounds the time of a whole sequential run. `tail_bound` 4 (default 3):
-#: beyond the spline interval the flow is the identity, so base draws past ±3 escape the
-#: splines' contraction to TSNPE's narrow posterior and land near the box edges; a wider
-#: interval (5) leaves round 1 overconfident under SBC.
-CNN_CONFIG = NPEConfig(
-    flow=SplineFlowSettings(tail_bound=4.0),
-    training=TrainingSettings(
-        batch_size=256, learning_rate=1e-3, max_epochs=20, patience=6, lr_schedule="cosine"
-    ),
-    sequential=SequentialSettings(later_max_epochs=30),
-)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,23 +25,23 @@ class IdentifySettings:
     Attributes:
         rounds: APT rounds (1 = amortised NPE from the prior).
         sims_per_round: simulations per round.
-        embedding: "cnn" (1D-CNN on the raw trajectories, inputs appended as channels so the
-            net can relate response to excitation) or "stats" (handcrafted statistics + MLP).
+        embedding: what the estimator sees and the net that embeds it: `TrajectoryCNN`
+            (default) or `StatisticsMLP`.
         embed_dim: embedding size.
         num_samples: posterior samples to return.
         truncate: TSNPE (default): later rounds draw from the prior truncated to the current
             posterior's highest-density region and train by maximum likelihood (Deistler et
             al. 2022); False: APT's posterior proposals and atomic loss (Greenberg et al. 2019),
             which on the seed's maneuver can leave much of the posterior in a spurious mode.
-        config: flow and training hyperparameters (default: `CNN_CONFIG` or `STATS_CONFIG`
-            for the embedding); its ``flow.x_standardize`` is overridden by `npe_config` for the CNN
-            (see there). Later rounds wait ``ceil(patience · new/all)`` epochs
-            (``patience_unit="new_data"``), as for the other tasks.
+        config: flow and training hyperparameters (default: the embedding's
+            ``default_config``), as the embedding adjusts them (`npe_config`). Later rounds
+            wait ``ceil(patience · new/all)`` epochs (``patience_over_new_data``), as for the
+            other tasks.
     """
 
     rounds: int = 5
     sims_per_round: int = 5000
-    embedding: str = "cnn"
+    embedding: AbstractObservation = TrajectoryCNN()
     embed_dim: int = 32
     num_samples: int = 1000
     truncate: bool = True
@@ -74,20 +49,15 @@ class IdentifySettings:
 
     @property
     def npe_config(self) -> NPEConfig:
-        """`config`, with the CNN's raw trajectories standardised as deviations from the mean
-        simulated trajectory: all simulations share the recording's inputs, and per-channel
-        scaling alone buries small θ-driven differences under the manoeuvre's own variation."""
-        if self.embedding == "cnn":
-            flow = dataclasses.replace(self.config.flow, x_standardize="trajectory")
-            return dataclasses.replace(self.config, flow=flow)
-        return self.config
+        """`config` as the embedding needs it (`AbstractObservation.npe_config`)."""
+        return self.embedding.npe_config(self.config)
 
     def __post_init__(self):
-        if self.embedding not in ("cnn", "stats"):
-            raise InputError("settings", "embedding", f"must be 'cnn' or 'stats', got {self.embedding!r}")
+        if not isinstance(self.embedding, AbstractObservation):
+            what = f"must be TrajectoryCNN() or StatisticsMLP(), got {self.embedding!r}"
+            raise InputError("settings", "embedding", what)
         if self.config is None:  # the embedding's own training default
-            default = CNN_CONFIG if self.embedding == "cnn" else STATS_CONFIG
-            object.__setattr__(self, "config", default)
+            object.__setattr__(self, "config", self.embedding.default_config)
         if self.rounds < 1:
             raise InputError("settings", "rounds", f"must be >= 1, got {self.rounds}")
         if self.sims_per_round < 10:
@@ -96,21 +66,6 @@ class IdentifySettings:
 
 #: Fewest usable simulations training can start from: two to train on, one to validate.
 MIN_USABLE_SIMULATIONS = 3
-
-
-def observation(
-    readings: Float[Array, "T C"], inputs: Float[Array, "T 3"], embedding: str
-) -> Float[Array, "..."]:
-    """The x the estimator sees, from one trajectory of measured channels."""
-    if embedding == "cnn":
-        return jnp.concatenate([readings, inputs], axis=-1)
-    return summary_statistics(readings)
-
-
-def make_embedding(key: PRNGKeyArray, x_shape: tuple[int, ...], settings: IdentifySettings):
-    if settings.embedding == "cnn":
-        return CNNEmbedding(key, x_shape[-1], out_dim=settings.embed_dim)
-    return MLPEmbedding(key, int(np.prod(x_shape)), settings.embed_dim, width=128, depth=2)
 
 
 def seed_prior(literal: bool = False) -> BoxPrior:
@@ -169,7 +124,7 @@ def identify(
     inp = simulator.inputs
     u = jnp.stack([inp.steer, inp.torque_front, inp.torque_rear], axis=-1).astype(jnp.float32)
     # Inputs are standardised per channel by the flow's x-standardiser like any channel.
-    obs = jax.jit(jax.vmap(lambda r: observation(r, u, settings.embedding)))
+    obs = jax.jit(jax.vmap(lambda r: settings.embedding(r, u)))
     x_o = obs(readings_o[None])[0]
 
     def simulate(k, theta):
@@ -219,7 +174,7 @@ def fit_posterior(
         return x, ok
 
     k_emb, k_apt, k_s = jax.random.split(key, 3)
-    embedding = make_embedding(k_emb, x_o.shape, settings)
+    embedding = settings.embedding.embedding(k_emb, x_o.shape, settings.embed_dim)
     posterior, state = apt(
         k_apt,
         guarded,

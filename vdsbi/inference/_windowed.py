@@ -14,7 +14,7 @@ from ..simulator import Solver, SpeedDriven
 from ._apt_state import APTState
 from ._posterior import Posterior
 from ._prior import BoxPrior
-from ._vehicle import IdentifySettings, fit_posterior, observation
+from ._vehicle import IdentifySettings, fit_posterior
 
 
 def input_channels(problem: Problem) -> Float[Array, "W K I"]:
@@ -64,7 +64,7 @@ def identify_problem(
     wm = windowed_model(train, effects, solver)
     mask = train.train
     u = flatten_windows(input_channels(train)[None], mask)[0].astype(jnp.float32)
-    to_x = jax.jit(jax.vmap(lambda r: observation(r, u, settings.embedding)))
+    to_x = jax.jit(jax.vmap(lambda r: settings.embedding(r, u)))
     x_o = to_x(flatten_windows(jnp.asarray(train.y)[None], mask).astype(jnp.float32))[0]
     jitter = 0.0 if issubclass(train.model_class, SpeedDriven) else 0.2 + 0.02 * float(np.mean(train.v0))
 
