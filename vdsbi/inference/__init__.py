@@ -19,6 +19,7 @@ from ._embeddings import (
     embedding_from_spec as embedding_from_spec,
     register_embedding as register_embedding,
 )
+from ._estimator import AbstractEstimator as AbstractEstimator
 from ._flow import ConditionalFlow as ConditionalFlow, flow_from_spec as flow_from_spec
 from ._flow_matching import (
     FlowMatchingEstimator as FlowMatchingEstimator,

@@ -15,7 +15,7 @@ from ._apt_state import APTState
 from ._build import build_flow, first_round_loss
 from ._config import FlowMatchingSettings, NPEConfig, SequentialSettings, TrainingSettings
 from ._embeddings import AbstractEmbedding
-from ._flow import ConditionalFlow
+from ._estimator import AbstractEstimator
 from ._loss import AtomicLoss
 from ._posterior import Posterior, on_one_device, sample_flow
 from ._prior import BoxPrior
@@ -148,7 +148,7 @@ def _run_round(problem: _Problem, state: APTState, r: int, n: int) -> APTState:
 
 
 def _propose(
-    problem: _Problem, flow: ConditionalFlow | None, r: int, key: PRNGKeyArray, n: int
+    problem: _Problem, flow: AbstractEstimator | None, r: int, key: PRNGKeyArray, n: int
 ) -> tuple[Array, dict[str, Any]]:
     """``n`` parameters for round ``r``: from the prior, the truncated prior or the posterior."""
     if r == 0 or flow is None:
@@ -210,7 +210,7 @@ def _append_round(
 
 def _train_round(
     problem: _Problem,
-    flow: ConditionalFlow | None,
+    flow: AbstractEstimator | None,
     r: int,
     k_init: PRNGKeyArray,
     k_train: PRNGKeyArray,
@@ -219,7 +219,7 @@ def _train_round(
     round_ids: np.ndarray,
     is_val: np.ndarray,
     patience: int,
-) -> tuple[ConditionalFlow, dict[str, Any]]:
+) -> tuple[AbstractEstimator, dict[str, Any]]:
     """Train the flow on all kept data (a new one from ``k_init`` in round 1)."""
     config, seq = problem.config, problem.config.sequential
     fresh = flow is None

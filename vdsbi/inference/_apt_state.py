@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import PRNGKeyArray
 
-from ._flow import ConditionalFlow
+from ._estimator import AbstractEstimator
 from ._serialise import FORMAT_VERSION, flow_from_bytes, flow_to_bytes, read_npz, write_npz
 
 
@@ -34,7 +34,7 @@ class APTState:
     x: np.ndarray
     round_ids: np.ndarray
     is_val: np.ndarray
-    flow: ConditionalFlow | None
+    flow: AbstractEstimator | None
     history: tuple[dict[str, Any], ...] = ()
 
     @property

@@ -11,6 +11,7 @@ from jaxtyping import PRNGKeyArray
 
 from ._config import FlowMatchingSettings, SplineFlowSettings
 from ._embeddings import AbstractEmbedding
+from ._estimator import AbstractEstimator
 from ._flow import ConditionalFlow
 from ._flow_matching import FlowMatchingEstimator, FlowMatchingLoss
 from ._loss import MaximumLikelihoodLoss
@@ -25,7 +26,7 @@ def build_flow(
     theta: np.ndarray,
     x: np.ndarray,
     settings: SplineFlowSettings | FlowMatchingSettings,
-) -> ConditionalFlow | FlowMatchingEstimator:
+) -> AbstractEstimator:
     """A fresh estimator of ``settings``' kind whose θ (in the space of ``settings.theta_map``)
     and x standardisations are fitted on ``theta``/``x``."""
     z, _ = jax.vmap(lambda t: settings.theta_map.forward(prior, t))(jnp.asarray(theta))

@@ -19,7 +19,8 @@ import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 from jaxtyping import Array, Bool, Float, PRNGKeyArray
 
-from ._embeddings import AbstractEmbedding, embedding_from_spec
+from ._embeddings import AbstractEmbedding
+from ._estimator import AbstractEstimator, skeleton_parts
 from ._prior import BoxPrior
 from ._spline import num_spline_params, rq_spline_forward, rq_spline_inverse
 from ._standardize import Standardizer
@@ -178,7 +179,7 @@ def _masks(num_layers: int, dim: int):
     return jnp.stack([(idx % 2) == (i % 2) for i in range(num_layers)])
 
 
-class ConditionalFlow(eqx.Module):
+class ConditionalFlow(AbstractEstimator):
     """Conditional density estimator ``q(θ | x)`` on the box of ``prior``.
 
     Args:
@@ -255,10 +256,6 @@ class ConditionalFlow(eqx.Module):
         self.layers = eqx.filter_vmap(lambda k, m: _Layer(m, embedding.out_dim, key=k, **kw))(keys, masks)
 
     # ---- one example -------------------------------------------------------------------------
-    def context(self, x: Float[Array, "..."]) -> Float[Array, " c"]:
-        """Embedding of ONE observation."""
-        return self.embedding(self.x_standardizer(x))
-
     def _to_noise(self, zs, context):
         params, static = eqx.partition(self.layers, eqx.is_array)
 
@@ -292,10 +289,6 @@ class ConditionalFlow(eqx.Module):
         lp = base + ld_flow + self.theta_standardizer.log_det() + ld_box
         return jnp.where(inside, lp, -jnp.inf)
 
-    def log_prob(self, theta: Float[Array, " d"], x: Float[Array, "..."]) -> Float[Array, ""]:
-        """``log q(θ | x)`` for ONE θ and ONE x."""
-        return self.log_prob_context(theta, self.context(x))
-
     def unmasked_draw(self, eps: Float[Array, " d"], context: Float[Array, " c"]) -> Float[Array, " d"]:
         """The flow's draw for ONE base-noise vector, before any box constraint: always inside
         the box with a `LogitMap`; with an `IdentityMap` possibly outside it (a leak).
@@ -318,19 +311,9 @@ class ConditionalFlow(eqx.Module):
     def sample_context(self, key: PRNGKeyArray, context: Float[Array, " c"], n: int) -> Float[Array, "n d"]:
         return self.theta_map.sample(self._draw(context, n), self.prior, key, n)
 
-    def sample(self, key: PRNGKeyArray, x: Float[Array, "..."], n: int) -> Float[Array, "n d"]:
-        """``n`` draws of θ from ``q(θ | x)`` for ONE x; always strictly inside the prior box."""
-        return self.sample_context(key, self.context(x), n)
-
     # ---- reconstruction ------------------------------------------------------------------------
-    def spec(self) -> dict[str, Any]:
-        """JSON-serialisable description from which :func:`flow_from_spec` rebuilds the structure."""
+    def structure(self) -> dict[str, Any]:
         return {
-            "low": [float(v) for v in self.prior.low],
-            "high": [float(v) for v in self.prior.high],
-            "names": None if self.prior.names is None else list(self.prior.names),
-            "x_shape": list(self.x_shape),
-            "x_std_shape": list(self.x_standardizer.mean.shape),
             "num_layers": self.num_layers,
             "num_bins": self.num_bins,
             "hidden": self.hidden,
@@ -338,19 +321,7 @@ class ConditionalFlow(eqx.Module):
             "tail_bound": self.tail_bound,
             "use_lu": self.use_lu,
             "context_gating": self.context_gating,
-            "theta_map": self.theta_map.name,
-            "embedding": [type(self.embedding).__name__, self.embedding.spec()],
         }
-
-
-def skeleton_parts(spec: dict[str, Any]) -> tuple[BoxPrior, AbstractEmbedding, tuple[int, ...], Standardizer]:
-    """What every estimator's ``spec`` holds alike, rebuilt: the prior box, the embedding's
-    skeleton, the observation shape and an identity x standardiser of the stored shape."""
-    prior = BoxPrior(jnp.asarray(spec["low"]), jnp.asarray(spec["high"]), spec["names"])
-    name, espec = spec["embedding"]
-    xs = tuple(spec["x_std_shape"])
-    xstd = Standardizer(mean=jnp.zeros(xs), std=jnp.ones(xs))
-    return prior, embedding_from_spec(name, espec), tuple(spec["x_shape"]), xstd
 
 
 def flow_from_spec(spec: dict[str, Any]) -> ConditionalFlow:

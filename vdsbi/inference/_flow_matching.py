@@ -25,7 +25,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ._embeddings import AbstractEmbedding
-from ._flow import skeleton_parts
+from ._estimator import AbstractEstimator, skeleton_parts
 from ._loss import AbstractLoss
 from ._prior import BoxPrior
 from ._standardize import Standardizer
@@ -99,11 +99,10 @@ def _odeint(f, y0, t0: float, t1: float, steps: int):
     return jax.tree.map(lambda a: a[0], sol.ys)
 
 
-class FlowMatchingEstimator(eqx.Module):
+class FlowMatchingEstimator(AbstractEstimator):
     """Conditional density ``q(θ | x)`` on the box of ``prior``, as a flow-matching ODE.
 
-    The interface is `ConditionalFlow`'s (``context``, ``log_prob(_context)``,
-    ``sample(_context)``, ``spec``), so `fit`, `Posterior` and its save/load take either.
+    An `AbstractEstimator`, as `ConditionalFlow` is.
 
     Args:
         key: PRNG key for initialisation.
@@ -168,10 +167,6 @@ class FlowMatchingEstimator(eqx.Module):
             raise ValueError("need ode_steps >= 1 and 0 <= sigma_min < 1")
 
     # ---- one example -------------------------------------------------------------------------
-    def context(self, x: Float[Array, "..."]) -> Float[Array, " c"]:
-        """Embedding of ONE observation."""
-        return self.embedding(self.x_standardizer(x))
-
     def _to_z(self, theta):
         """θ (inside the box) to the standardised space the ODE lives in, and ``log|dz/dθ|``."""
         u, ld = self.theta_map.forward(self.prior, theta)
@@ -210,10 +205,6 @@ class FlowMatchingEstimator(eqx.Module):
         base = -0.5 * jnp.sum(z0**2) - 0.5 * self.dim * _LOG_2PI
         return jnp.where(inside, base + a0 + ld_map, -jnp.inf)
 
-    def log_prob(self, theta: Float[Array, " d"], x: Float[Array, "..."]) -> Float[Array, ""]:
-        """``log q(θ | x)`` for ONE θ and ONE x."""
-        return self.log_prob_context(theta, self.context(x))
-
     def transport(
         self, z: Float[Array, "n d"], context: Float[Array, " c"], t0: float, t1: float
     ) -> Float[Array, "n d"]:
@@ -228,27 +219,15 @@ class FlowMatchingEstimator(eqx.Module):
 
         return self.theta_map.sample(draw, self.prior, key, n)
 
-    def sample(self, key: PRNGKeyArray, x: Float[Array, "..."], n: int) -> Float[Array, "n d"]:
-        """``n`` draws of θ from ``q(θ | x)`` for ONE x; always inside the prior box."""
-        return self.sample_context(key, self.context(x), n)
-
     # ---- reconstruction ------------------------------------------------------------------------
-    def spec(self) -> dict[str, Any]:
-        """JSON-serialisable description from which :func:`fmpe_from_spec` rebuilds the structure."""
+    def structure(self) -> dict[str, Any]:
         return {
             "estimator": "fmpe",
-            "low": [float(v) for v in self.prior.low],
-            "high": [float(v) for v in self.prior.high],
-            "names": None if self.prior.names is None else list(self.prior.names),
-            "x_shape": list(self.x_shape),
-            "x_std_shape": list(self.x_standardizer.mean.shape),
             "hidden": self.hidden,
             "num_blocks": self.num_blocks,
             "num_freqs": self.num_freqs,
             "ode_steps": self.ode_steps,
             "sigma_min": self.sigma_min,
-            "theta_map": self.theta_map.name,
-            "embedding": [type(self.embedding).__name__, self.embedding.spec()],
         }
 
 

@@ -10,7 +10,7 @@ from jaxtyping import PRNGKeyArray
 from ._build import build_flow, first_round_loss
 from ._config import NPEConfig
 from ._embeddings import AbstractEmbedding
-from ._flow import ConditionalFlow
+from ._estimator import AbstractEstimator
 from ._prior import BoxPrior
 from ._train import fit
 
@@ -25,7 +25,7 @@ def npe(
     config: NPEConfig = NPEConfig(),
     mesh=None,
     on_epoch_end: Callable[[int, int, float, float], None] | None = None,
-) -> tuple[ConditionalFlow, dict[str, Any]]:
+) -> tuple[AbstractEstimator, dict[str, Any]]:
     """Train ``q(θ | x)`` on the pairs ``(theta, x)`` (prior draws): by maximum likelihood, or
     by flow matching with ``config.flow`` a `FlowMatchingSettings`.
 

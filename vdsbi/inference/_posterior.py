@@ -7,7 +7,7 @@ import numpy as np
 import optax
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from ._flow import ConditionalFlow
+from ._estimator import AbstractEstimator
 from ._prior import BoxPrior
 from ._serialise import FORMAT_VERSION, flow_from_bytes, flow_to_bytes, read_npz, write_npz
 
@@ -54,11 +54,11 @@ class Posterior(eqx.Module):
     """A conditional flow together with a default observation ``x_o``.
 
     Args:
-        flow: the trained :class:`ConditionalFlow`.
+        flow: the trained `AbstractEstimator`.
         x_o: default observation (one example, shape ``flow.x_shape``), or None.
     """
 
-    flow: ConditionalFlow
+    flow: AbstractEstimator
     x_o: Float[Array, "..."] | None = None
 
     @property

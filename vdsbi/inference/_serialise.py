@@ -9,19 +9,20 @@ from typing import Any
 import equinox as eqx
 import numpy as np
 
-from ._flow import ConditionalFlow, flow_from_spec
+from ._estimator import AbstractEstimator
+from ._flow import flow_from_spec
 from ._flow_matching import fmpe_from_spec
 
 FORMAT_VERSION = 1
 
 
-def flow_to_bytes(flow: ConditionalFlow) -> np.ndarray:
+def flow_to_bytes(flow: AbstractEstimator) -> np.ndarray:
     buf = io.BytesIO()
     eqx.tree_serialise_leaves(buf, flow)
     return np.frombuffer(buf.getvalue(), dtype=np.uint8)
 
 
-def flow_from_bytes(spec: dict[str, Any], data: np.ndarray) -> ConditionalFlow:
+def flow_from_bytes(spec: dict[str, Any], data: np.ndarray) -> AbstractEstimator:
     """The estimator (spline flow or `FlowMatchingEstimator`) described by ``spec``."""
     skeleton = fmpe_from_spec(spec) if spec.get("estimator") == "fmpe" else flow_from_spec(spec)
     return eqx.tree_deserialise_leaves(io.BytesIO(np.asarray(data, np.uint8).tobytes()), skeleton)

@@ -13,7 +13,7 @@ from jaxtyping import PRNGKeyArray
 
 from ..simulator import in_background
 from ._config import TrainingSettings
-from ._flow import ConditionalFlow
+from ._estimator import AbstractEstimator
 from ._loss import AbstractLoss
 from ._sharding import data_mesh, replicate, stack_batches
 
@@ -59,11 +59,10 @@ def _set_learning_rate(opt_state, value: float):
     return optax.tree_utils.tree_set(opt_state, learning_rate=new)
 
 
-def trainable_filter(flow: ConditionalFlow):
+def trainable_filter(flow: AbstractEstimator):
     """Boolean pytree: True on the trained weights, False on the frozen prior and standardisations.
 
-    Any estimator with the fields ``prior``, ``theta_standardizer`` and ``x_standardizer`` (the
-    spline flow, `FlowMatchingEstimator`): every other inexact array is trained.
+    Any `AbstractEstimator`: every inexact array but its prior's and standardisers' is trained.
     """
     spec = jax.tree.map(eqx.is_inexact_array, flow)
     frozen = lambda f: (f.prior, f.theta_standardizer, f.x_standardizer)  # noqa: E731
@@ -80,7 +79,7 @@ def _update(params, static, opt_state, batch, key, loss: AbstractLoss, optimizer
 
 
 @eqx.filter_jit
-def train_step(flow: ConditionalFlow, opt_state, batch, key: PRNGKeyArray, loss: AbstractLoss, optimizer):
+def train_step(flow: AbstractEstimator, opt_state, batch, key: PRNGKeyArray, loss: AbstractLoss, optimizer):
     """One optimisation step on ``batch = (theta, x, prior_mask)``; returns ``(flow, opt_state, loss)``."""
     params, static = eqx.partition(flow, trainable_filter(flow))
     params, opt_state, value = _update(params, static, opt_state, batch, key, loss, optimizer)
@@ -89,7 +88,7 @@ def train_step(flow: ConditionalFlow, opt_state, batch, key: PRNGKeyArray, loss:
 
 @eqx.filter_jit
 def train_steps(
-    flow: ConditionalFlow, opt_state, batches, keys, loss: AbstractLoss, optimizer, live=None, average=None
+    flow: AbstractEstimator, opt_state, batches, keys, loss: AbstractLoss, optimizer, live=None, average=None
 ):
     """Consecutive steps in one ``lax.scan``: ``batches`` leaves are ``(num_steps, batch, ...)``.
 
@@ -131,7 +130,7 @@ def train_steps(
 
 
 @eqx.filter_jit
-def eval_steps(flow: ConditionalFlow, batches, key: PRNGKeyArray, loss: AbstractLoss, live=None):
+def eval_steps(flow: AbstractEstimator, batches, key: PRNGKeyArray, loss: AbstractLoss, live=None):
     """Mean loss over ``(num_batches, batch, ...)`` validation batches (the ``live`` ones), in one
     compiled loop; padding batches are skipped, not evaluated (at 10³ simulations one live batch
     in a block of 32 cost as much as the epoch's training)."""
@@ -150,7 +149,7 @@ def eval_steps(flow: ConditionalFlow, batches, key: PRNGKeyArray, loss: Abstract
     return jnp.sum(jnp.where(live, values, 0.0)) / jnp.maximum(jnp.sum(live), 1)
 
 
-def init_opt_state(flow: ConditionalFlow, optimizer):
+def init_opt_state(flow: AbstractEstimator, optimizer):
     return optimizer.init(eqx.filter(flow, trainable_filter(flow)))
 
 
@@ -254,12 +253,12 @@ def _scheduled(state, training: TrainingSettings, epoch: int):
 class _EarlyStopping:
     """The best-validation flow so far, the loss histories, and the epochs since the last best."""
 
-    def __init__(self, flow: ConditionalFlow, patience: int):
+    def __init__(self, flow: AbstractEstimator, patience: int):
         self.best, self.flow, self.epoch, self.since = np.inf, flow, -1, 0
         self.patience = patience
         self.train_losses, self.val_losses = [], []
 
-    def update(self, epoch: int, flow: ConditionalFlow, train_loss: float, val_loss: float) -> bool:
+    def update(self, epoch: int, flow: AbstractEstimator, train_loss: float, val_loss: float) -> bool:
         """Record one epoch; True once ``patience`` epochs have passed without a better one."""
         self.train_losses.append(train_loss)
         self.val_losses.append(val_loss)
@@ -282,7 +281,7 @@ class _EarlyStopping:
 
 def fit(
     key: PRNGKeyArray,
-    flow: ConditionalFlow,
+    flow: AbstractEstimator,
     theta: np.ndarray,
     x: np.ndarray,
     prior_mask: np.ndarray,

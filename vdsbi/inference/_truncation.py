@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, PRNGKeyArray
 
-from ._flow import ConditionalFlow
+from ._estimator import AbstractEstimator
 from ._posterior import flow_log_prob, sample_flow
 from ._prior import BoxPrior
 
@@ -123,7 +123,7 @@ def _reject(key, propose, keep, n: int) -> tuple[np.ndarray, int]:
 
 def truncated_prior(
     key: PRNGKeyArray,
-    flow: ConditionalFlow,
+    flow: AbstractEstimator,
     prior: BoxPrior,
     x_o: Array,
     n: int,
