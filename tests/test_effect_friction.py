@@ -54,13 +54,16 @@ def test_prior_reaches_the_grip_the_drive_used():
     # at least 2: the box reaches past that, unless the user or vehicle.json set it.
     import dataclasses
 
-    from vdsbi.problem import GRIP_MARGIN, prior_box
+    from vdsbi.problem import prior_box
+    from vdsbi.simulator import get_effect
 
     vehicle = default_vehicle()
     effects = ("tyre_friction",)
     high = lambda box: box["tyre_friction.scale_rear"][1]
     assert high(prior_box(vehicle, effects, grip=0.9)) == pytest.approx(1.8)  # the effect's own bound
-    assert high(prior_box(vehicle, effects, grip=2.0)) == pytest.approx(GRIP_MARGIN * 2.0)
+    assert high(prior_box(vehicle, effects, grip=2.0)) == pytest.approx(
+        get_effect("tyre_friction").grip_margin * 2.0
+    )
     asked = {"tyre_friction.scale_rear": (0.5, 1.6)}
     assert high(prior_box(vehicle, effects, asked, grip=2.0)) == pytest.approx(1.6)
     fixed = dataclasses.replace(vehicle, prior={"tyre_friction.scale_rear": (0.5, 1.7)})

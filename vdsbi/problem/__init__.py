@@ -14,7 +14,6 @@ from ._noise import (
     lag1_autocorrelation as lag1_autocorrelation,
 )
 from ._parameters import (
-    GRIP_MARGIN as GRIP_MARGIN,
     parameter_names as parameter_names,
     parameter_units as parameter_units,
     prior_box as prior_box,

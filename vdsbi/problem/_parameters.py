@@ -23,10 +23,6 @@ def parameter_units(effects: Sequence[str] = ()) -> dict[str, str]:
     return out
 
 
-#: The friction factors' prior reaches at least this multiple of the grip the drive used.
-GRIP_MARGIN = 1.25
-
-
 def prior_box(
     vehicle: Vehicle,
     effects: Sequence[str] = (),
@@ -38,9 +34,8 @@ def prior_box(
     `prior`, then `overrides` (e.g. the ranges a diagnosis measured), replace any of them by full
     name (``signal_delay.delay``).
 
-    A drive that uses `grip` × vehicle.json's μ·g (`grip_used`) needs friction factors of at
-    least `grip` (a race car's downforce included, which the model lacks): the upper bound of
-    `tyre_friction`'s factors reaches `GRIP_MARGIN` × `grip` unless vehicle.json sets them.
+    `grip` is the share of vehicle.json's μ·g the drive uses (`grip_used`): an effect whose range
+    depends on it widens its bounds (`AbstractEffect.prior_bounds`) unless vehicle.json sets them.
 
     Raises:
         ValueError: an override for an unknown parameter, or with low ≥ high.
@@ -48,10 +43,8 @@ def prior_box(
     box = dict(vehicle.default_prior())
     for e in effects:
         eff = get_effect(e)
-        for p, (lo, hi), null in zip(eff.param_names, eff.bounds, eff.null):
+        for p, (lo, hi), null in zip(eff.param_names, eff.prior_bounds(grip), eff.null):
             name = f"{e}.{p}"
-            if e == "tyre_friction" and grip is not None:
-                hi = max(hi, GRIP_MARGIN * grip)
             box[name] = tuple(float(v) for v in vehicle.prior.get(name, (min(lo, null), max(hi, null))))
     for name, (lo, hi) in (overrides or {}).items():
         if name not in box:

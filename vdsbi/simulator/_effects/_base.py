@@ -46,6 +46,7 @@ class AbstractEffect(eqx.Module):
       they exist);
     - `start`: where a fit starts when the effect is switched on, strictly inside `bounds`.
     - `searched`: whether discovery's search includes it (default True).
+    - `prior_bounds`: `bounds` for a drive's prior box (default: as they are).
 
     `register_effect` checks them. Hooks receive `p`, the effect's parameter vector.
     """
@@ -60,6 +61,12 @@ class AbstractEffect(eqx.Module):
     description: AbstractClassVar[str]
     num_states: ClassVar[int] = 0
     searched: ClassVar[bool] = True
+
+    @classmethod
+    def prior_bounds(cls, grip: float | None) -> tuple[tuple[float, float], ...]:
+        """`bounds` as the prior box of a drive that uses `grip` × vehicle.json's μ·g (None:
+        not known); an effect whose range depends on it says so here."""
+        return cls.bounds
 
     def init_state(self, p, u0: Float[Array, "3"]) -> Float[Array, " S"]:
         return jnp.zeros(self.num_states)
