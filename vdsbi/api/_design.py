@@ -114,9 +114,8 @@ def design(
     _check_target_and_steps(target, steps)
     th = checked_theta(theta, veh)
     limits = _limits(duration, max_steer, max_drive, max_brake, brake_front_share, speed_window)
-    named = noise
-    noise = sensor_noise(named, veh, source)
-    channels, _ = noise_channels(list(SEED_CHANNELS), noise, source)
+    sensor = sensor_noise(noise, veh, source)
+    channels, _ = noise_channels(list(SEED_CHANNELS), sensor, source)
     with jax.enable_x64(True):
         import jax.numpy as jnp
 
@@ -124,12 +123,12 @@ def design(
         from ..simulator import make_model
 
         model, th = make_model(veh), jnp.asarray(th, dtype=float)
-        problem = _problem(model, th, limits, target, channels, noise)
+        problem = _problem(model, th, limits, target, channels, sensor)
         start = Maneuver.seed_like(limits)
         res = _optimise(problem, start, steps, learning_rate, log or (lambda s: None))
         designed, v0 = res.maneuver.inputs(limits), float(res.maneuver.initial_speed(limits))
-        fisher = dict(channels=channels, noise=noise)
-        bounds = _bounds(model, th, limits, start, res.maneuver, designed, v0, fisher, target, named)
+        fisher = dict(channels=channels, noise=sensor)
+        bounds = _bounds(model, th, limits, start, res.maneuver, designed, v0, fisher, target, noise)
         rec = _recording(model, th, designed, v0)
         described = res.maneuver.describe(limits)
     return DesignReport(bounds, _info(target, described, limits, steps, res), rec)

@@ -92,10 +92,11 @@ def observability(
     rec, problem, mode, inputs = _maneuver(maneuver, veh)
     channels = _checked_channels(channels, problem)
     v0 = checked_v0(_default_v0(rec, veh) if v0 is None else v0)
-    channels, dropped = noise_channels(channels, sensor_noise(noise, veh, source), source)
+    sensor = sensor_noise(noise, veh, source)
+    channels, dropped = noise_channels(channels, sensor, source)
     th = checked_theta(theta, veh)
     model, params = _model(veh, effects, effect_params, mode)
-    rep = _report(model, th, inputs, v0, params, channels, sensor_noise(noise, veh, source), veh, problem)
+    rep = _report(model, th, inputs, v0, params, channels, sensor, veh, problem)
     rep["maneuver"] = label or (rec.source if rec is not None else "inputs")
     rep["v0"] = v0
     rep["noise"] = noise

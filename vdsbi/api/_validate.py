@@ -129,8 +129,8 @@ def noise_channels(
     """
     if noise is None:
         raise InputError("--noise", "none", "information needs a noise model: seed or vehicle")
-    rel, add = np.asarray(noise.relative), np.asarray(noise.additive)
-    dropped = [c for c in channels if not (rel[CHANNELS.index(c)] > 0 or add[CHANNELS.index(c)] > 0)]
+    noisy = np.asarray(noise.relative > 0) | np.asarray(noise.additive > 0)  # CHANNELS order
+    dropped = [c for c in channels if not noisy[CHANNELS.index(c)]]
     kept = [c for c in channels if c not in dropped]
     if not kept:
         raise InputError(
