@@ -13,6 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ..io import output_dir
+from ..simulator import in_background
 from ._commands import measured_priors
 from ._diagnose import diagnose
 from ._identify import identify
@@ -160,12 +161,23 @@ def demo(
         say(f"1/5 simulating a {b.duration:g} s drive of the built-in vehicle with a concealed effect")
         truth = demo_recording(d, duration=b.duration, seed=seed)
         rec, veh = _drive(d, name)
+        if run_diagnosis:
+            # The diagnosis does not use the first identification, so it runs alongside it on
+            # another thread: each spends much of its time compiling on one core.
+            lines: list[str] = []
+            quiet = log is None
+            diagnosing = in_background(
+                _diagnose, rec, veh, d, name, seed=seed, quiet=quiet, options=b.diagnose, log=lines.append
+            )
         say(f"2/5 identify with the base model: {b.base_rounds} round(s) x {b.sims} simulations")
         # Flagged anyway: no point spending more rounds on it.
         base = run(rec, veh, d, name, "identify", (), rounds=b.base_rounds)
         runs, diagnosis, report = [("base model", "identify", base)], "skipped (--no-diagnose)", None
         if run_diagnosis:
-            report = _diagnose(rec, veh, d, name, seed=seed, quiet=log is None, options=b.diagnose, say=say)
+            say("3/5 diagnose: looking for missing physics (run alongside step 2)")
+            report = diagnosing.result()
+            for line in lines:
+                say(line)
             diagnosis = _diagnosis(report)
             if report["chosen"]:
                 say(f"4/5 identify again, as diagnose says: {report['identify_command']}")
@@ -184,11 +196,10 @@ def _names(name: Path, folder: str) -> tuple[Path, Path, Path]:
     return name / "recording.csv", name / "vehicle.json", name / folder
 
 
-def _diagnose(rec, veh, d: Path, name: Path, *, seed: int, quiet: bool, options: dict, say) -> dict:
-    """The diagnosis of the demo drive into d/diagnose; its report."""
-    say("3/5 diagnose: looking for missing physics")
+def _diagnose(rec, veh, d: Path, name: Path, *, seed: int, quiet: bool, options: dict, log) -> dict:
+    """The diagnosis of the demo drive into d/diagnose, its progress lines to `log`; its report."""
     res = diagnose(
-        rec, veh, d / "diagnose", names=_names(name, "diagnose"), seed=seed, quiet=quiet, **options
+        rec, veh, d / "diagnose", names=_names(name, "diagnose"), seed=seed, quiet=quiet, log=log, **options
     )
     return res.report
 

@@ -21,13 +21,12 @@ UNITS = {
 }
 
 
-def _pyplot():
-    import matplotlib
+def _figure(**kwargs):
+    """A figure outside pyplot's global state: figures drawn on several threads (the demo
+    identifies while it diagnoses) then never share a figure manager."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    return Figure(**kwargs)
 
 
 #: Units shown scaled, so that axes read 72 kN/rad rather than 72000.
@@ -62,7 +61,6 @@ def pairplot(
         reference: (d,) values marked in green (e.g. a lab's).
         faded: parameters drawn grey (the drive cannot inform them).
     """
-    plt = _pyplot()
     d = samples.shape[1]
     scale = np.array([display_unit(u)[0] for u in units]) if units is not None else np.ones(d)
     shown = [f"{n} [{display_unit(u)[1]}]" for n, u in zip(labels, units)] if units is not None else labels
@@ -73,7 +71,7 @@ def pairplot(
     # Only the lower triangle is drawn, with fixed margins: creating and laying out d² axes
     # (tight_layout) took most of a 9-parameter plot's seconds.
     width = 1.9 * d + 0.6
-    fig = plt.figure(figsize=(width, width - 0.2))
+    fig = _figure(figsize=(width, width - 0.2))
     grid = fig.add_gridspec(
         d, d, left=0.8 / width, right=0.98, bottom=0.7 / width, top=1 - 0.6 / width, wspace=0.1, hspace=0.1
     )
@@ -102,7 +100,6 @@ def pairplot(
     if title is not None:
         fig.suptitle(title, x=0.02, ha="left", fontsize=10)
     fig.savefig(path, dpi=80)
-    plt.close(fig)
 
 
 def _data_span(x: np.ndarray) -> np.ndarray:
@@ -157,9 +154,9 @@ def _mass_levels(h: np.ndarray, masses: Sequence[float]) -> list[float]:
 def ppc_plot(prob: Any, ppc: dict[str, np.ndarray], path: str | os.PathLike) -> None:
     """Per compared channel of a `Problem`: the recording over the posterior-predictive median
     and 90 % band, window by window; held-out windows (or parts) shaded grey."""
-    plt = _pyplot()
     c = len(prob.channels)
-    fig, axes = plt.subplots(c, 1, figsize=(11, 2.0 * c), sharex=True)
+    fig = _figure(figsize=(11, 2.0 * c))
+    axes = fig.subplots(c, 1, sharex=True)
     axes = np.atleast_1d(axes)
     for w in range(prob.num_windows):
         t = prob.t_out[w]
@@ -194,13 +191,12 @@ def ppc_plot(prob: Any, ppc: dict[str, np.ndarray], path: str | os.PathLike) -> 
         ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
-    plt.close(fig)
 
 
 def drive_plot(rec: Any, theta: np.ndarray, effects: Sequence[str], path: str | os.PathLike) -> None:
     """A recording's inputs and six channels against time, one panel each (PNG)."""
-    plt = _pyplot()
-    fig, axes = plt.subplots(4, 2, figsize=(11, 9), sharex=True)
+    fig = _figure(figsize=(11, 9))
+    axes = fig.subplots(4, 2, sharex=True)
     ax = axes[0, 0]
     ax.plot(rec.t, rec.steer, color="k")
     ax.set_ylabel("steer [rad]")
@@ -223,7 +219,6 @@ def drive_plot(rec: Any, theta: np.ndarray, effects: Sequence[str], path: str | 
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110, format="png")
-    plt.close(fig)
 
 
 def before_after_plot(
@@ -242,9 +237,8 @@ def before_after_plot(
         truth: true values by parameter name (red lines).
         channels: channels of the held-out overlay.
     """
-    plt = _pyplot()
     names = [n for n in PARAM_NAMES if n in runs[0][1].summary["parameters"]]
-    fig = plt.figure(figsize=(13, 3.0 + 2.1 * len(channels)))
+    fig = _figure(figsize=(13, 3.0 + 2.1 * len(channels)))
     grid = fig.add_gridspec(1 + len(channels), len(names), height_ratios=[1.2] + [1.0] * len(channels))
     colours = ("C3", "C0")
     for k, n in enumerate(names):
@@ -279,7 +273,6 @@ def before_after_plot(
         fig.suptitle(title, fontsize=11)
     fig.tight_layout()
     fig.savefig(path, dpi=80)
-    plt.close(fig)
 
 
 def _held_out_bands(ax, runs, channel: str, colours) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
 
@@ -271,6 +272,7 @@ def diagnose_mismatch(
     out_dir: str | os.PathLike | None = None,
     *,
     settings: DiagnoseSettings | None = None,
+    log: Callable[[str], None] | None = None,
     **options,
 ) -> DiagnosisResult:
     """Find where a recording and the model disagree, name the missing physics and fix it.
@@ -286,6 +288,7 @@ def diagnose_mismatch(
         out_dir: if given, write report.json, report.md and plots there (must not exist or be
             empty).
         settings: how to search (default `DiagnoseSettings()`).
+        log: where progress lines go unless `quiet` (default: printed).
         **options: any `DiagnoseSettings` field (seed, alpha, max_effects, candidates, ...),
             overriding `settings`.
 
@@ -293,7 +296,7 @@ def diagnose_mismatch(
         `DiagnosisResult`.
     """
     s = dataclasses.replace(settings or DiagnoseSettings(), **options)
-    say = Progress(s.quiet)
+    say = Progress(s.quiet, log)
     vehicle = vehicle if isinstance(vehicle, Vehicle) else read_vehicle(vehicle)
     recording = recording if isinstance(recording, Recording) else read_recording(recording)
     names = s.candidate_names()

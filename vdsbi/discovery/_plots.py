@@ -9,10 +9,8 @@ import numpy as np
 
 def write_plots(result, out: Path) -> None:
     """residual_heatmap.png, overlay.png and residual_spectra.png in ``out``."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # Figures outside pyplot's global state, so that plotting is safe on any thread.
+    from matplotlib.figure import Figure
 
     plots = {
         "residual_heatmap.png": _plot_residual_heatmap,
@@ -20,12 +18,11 @@ def write_plots(result, out: Path) -> None:
         "residual_spectra.png": _plot_residual_spectra,
     }
     for name, plot in plots.items():
-        fig = plot(plt, result)
+        fig = plot(Figure, result)
         fig.savefig(out / name, dpi=110, bbox_inches="tight")
-        plt.close(fig)
 
 
-def _plot_residual_heatmap(plt, result):
+def _plot_residual_heatmap(figure, result):
     """Channel × time, the low-passed whitened residual of the base fit."""
     win = result.windows
     chans = win.channels
@@ -40,9 +37,8 @@ def _plot_residual_heatmap(plt, result):
             for w in range(res.shape[0])
         ]
     )
-    fig, axes = plt.subplots(
-        1, res.shape[0], figsize=(max(10, 1.2 * res.shape[0]), 0.5 * len(chans) + 2), squeeze=False
-    )
+    fig = figure(figsize=(max(10, 1.2 * res.shape[0]), 0.5 * len(chans) + 2))
+    axes = fig.subplots(1, res.shape[0], squeeze=False)
     vmax = max(3.0, float(np.percentile(np.abs(sm), 99)))
     for w in range(res.shape[0]):
         ax = axes[0, w]
@@ -61,12 +57,13 @@ def _plot_residual_heatmap(plt, result):
     return fig
 
 
-def _plot_overlay(plt, result):
+def _plot_overlay(figure, result):
     """Measured, before and after per channel; held-out parts shaded."""
     win = result.windows
     chans = win.channels
     p0, p1 = result.predictions["before"], result.predictions["after"]
-    fig, axes = plt.subplots(len(chans), 1, figsize=(10, 1.8 * len(chans)), sharex=True, squeeze=False)
+    fig = figure(figsize=(10, 1.8 * len(chans)))
+    axes = fig.subplots(len(chans), 1, sharex=True, squeeze=False)
     for c, name in enumerate(chans):
         ax = axes[c, 0]
         for w in range(win.num_windows):
@@ -83,11 +80,12 @@ def _plot_overlay(plt, result):
     return fig
 
 
-def _plot_residual_spectra(plt, result):
+def _plot_residual_spectra(figure, result):
     """Residual power spectra before and after, against the white-noise level."""
     chans = result.windows.channels
     dt = result.windows.compared_dt
-    fig, axes = plt.subplots(len(chans), 1, figsize=(8, 1.6 * len(chans)), sharex=True, squeeze=False)
+    fig = figure(figsize=(8, 1.6 * len(chans)))
+    axes = fig.subplots(len(chans), 1, sharex=True, squeeze=False)
     for key, col in (("before", "C3"), ("after", "C0")):
         r = result.residual_stretches[key]
         spec = (np.abs(np.fft.rfft(r, axis=1)) ** 2 / r.shape[1]).mean(0)

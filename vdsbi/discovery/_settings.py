@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from collections.abc import Callable, Sequence
 
@@ -83,10 +84,11 @@ class DiagnoseSettings:
 
 
 class Progress:
-    """Progress lines (none when quiet); `seconds` since the start."""
+    """Progress lines to `log` (default: printed; none when quiet); `seconds` since the start."""
 
-    def __init__(self, quiet: bool):
+    def __init__(self, quiet: bool, log: Callable[[str], None] | None = None):
         self.quiet, self.t_start = quiet, time.perf_counter()
+        self.log = log or functools.partial(print, flush=True)
 
     @property
     def seconds(self) -> float:
@@ -94,4 +96,4 @@ class Progress:
 
     def __call__(self, msg: str) -> None:
         if not self.quiet:
-            print(msg, flush=True)
+            self.log(msg)

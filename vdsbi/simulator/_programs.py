@@ -67,8 +67,9 @@ def in_background(fn: Callable, /, *args, **kwargs) -> Future:
     """``fn(*args, **kwargs)`` on a short-lived worker thread under the caller's float64 setting.
 
     Run for its compilations, it makes the jitted functions it calls compile their programs for
-    these shapes, which a later call of the same shapes in any thread then finds. Make it a cheap
-    call (one iteration, one draw): it shares the cores with the work this thread goes on with.
+    these shapes, which a later call of the same shapes in any thread then finds; make such a
+    call cheap (one iteration, one draw). Or run a whole stage that does not need this thread's
+    result: while one thread compiles on one core, the other's work takes the other.
     ``result()`` waits for it (and raises what it raised); a future nobody asks keeps its error.
     """
     pool = ThreadPoolExecutor(1)
