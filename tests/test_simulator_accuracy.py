@@ -12,6 +12,7 @@ from vdsbi.simulator import (
     GRAVITY,
     NOMINAL_THETA,
     PARAM_NAMES,
+    RK4,
     SEED_RELATIVE_NOISE,
     SEED_TRUE_THETA,
     Inputs,
@@ -74,15 +75,26 @@ def test_float64_fixed_step_matches_adaptive_reference(seed_runs):
     assert np.all(rel < 1e-6), dict(zip(CHANNELS, rel))
 
 
-def test_rk4_is_fourth_order(x64):
+@pytest.mark.parametrize("unroll", [False, True])
+def test_rk4_is_fourth_order(x64, unroll):
     inputs = smooth_profile()
     theta = theta_of(SEED_TRUE_THETA)
     ref = run(theta, inputs, REFERENCE)
-    errs = [np.abs(run(theta, inputs, Solver(dt=dt)) - ref).max(0) for dt in (0.005, 0.0025, 0.00125)]
+    solvers = [RK4(dt, unroll=unroll) for dt in (0.005, 0.0025, 0.00125)]
+    errs = [np.abs(run(theta, inputs, solver) - ref).max(0) for solver in solvers]
     for coarse, fine in zip(errs, errs[1:]):
         ratio = coarse / fine
         # Halving h divides a 4th-order global error by 2^4 = 16.
         assert np.all((ratio > 13) & (ratio < 19)), dict(zip(CHANNELS, ratio))
+
+
+@pytest.mark.parametrize("dt", [0.005, 0.0025])
+def test_rk4_layouts_agree(x64, dt):
+    """The stage loop and the written-out stages are one method: the same steps to rounding."""
+    inputs, theta = seed_profile(), theta_of(SEED_TRUE_THETA)
+    rolled, unrolled = (run(theta, inputs, RK4(dt, unroll=u)) for u in (False, True))
+    np.testing.assert_allclose(rolled, unrolled, rtol=1e-12, atol=1e-12 * np.abs(unrolled).max())
+    assert RK4(dt).batched() == RK4(dt, unroll=True)
 
 
 def test_default_float32_within_tenth_of_sensor_noise(seed_runs):

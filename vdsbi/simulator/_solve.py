@@ -162,6 +162,7 @@ def solve_batch(
     `effect_params` holds one (N, P_e) array per enabled effect. `lateral0`, if given, is the
     initial (Vy m/s, r rad/s) per draw, (N, 2) or broadcastable to it (e.g. (2,)). A failed
     draw is flagged in the returned mask; it never raises and never spoils the others.
+    Integrates with `solver.batched()`, the layout made for many draws.
     """
     _require_measured(type(model), inputs)
     theta = jnp.asarray(theta)
@@ -174,7 +175,7 @@ def solve_batch(
     if lateral0 is not None:
         lateral0 = jnp.broadcast_to(jnp.asarray(lateral0, dtype=theta.dtype), (n, 2))
     theta, v0, effect_params, lateral0 = shard_draws((theta, v0, effect_params, lateral0), n)
-    ys, ok = _solve_batch(model, theta, inputs, v0, effect_params, solver, lateral0)
+    ys, ok = _solve_batch(model, theta, inputs, v0, effect_params, solver.batched(), lateral0)
     return ys[:n], ok[:n]
 
 
