@@ -181,13 +181,15 @@ def simulate_draws(
 def _simulate_batch(keys, wm, theta, sigma_raw, v0_jitter, effect_params, minimum: int):
     """One vmapped call over the draws, padded to `minimum` (noise-free ones to `CLEAN_BATCH`
     unless chunked: the fit's checks, the validation and the predictive band then share one
-    compiled program; chunks to their common size), integrated with `solver.batched()`."""
+    compiled program; chunks to their common size)."""
     n = theta.shape[0]
-    wm = eqx.tree_at(lambda m: m.solver, wm, wm.solver.batched())
     if keys is None:
         theta_s, ep_s = shard_draws((theta, effect_params), n, minimum=minimum)
         ys, ok = _clean_batch(wm, theta_s, ep_s)
     else:
+        # Training draws come by the thousand, round after round: their layout is the one
+        # made for many draws. The checks' few noise-free draws keep the fits' smaller program.
+        wm = eqx.tree_at(lambda m: m.solver, wm, wm.solver.batched())
         keys_s, theta_s, ep_s = shard_draws((keys, theta, effect_params), n, minimum=minimum)
         sig = jnp.asarray(sigma_raw, theta.dtype)
         ys, ok = _noisy_batch(wm, keys_s, theta_s, sig, jnp.asarray(v0_jitter, theta.dtype), ep_s)
