@@ -187,9 +187,6 @@ def _simulate_batch(keys, wm, theta, sigma_raw, v0_jitter, effect_params, minimu
         theta_s, ep_s = shard_draws((theta, effect_params), n, minimum=minimum)
         ys, ok = _clean_batch(wm, theta_s, ep_s)
     else:
-        # Training draws come by the thousand, round after round: their layout is the one
-        # made for many draws. The checks' few noise-free draws keep the fits' smaller program.
-        wm = eqx.tree_at(lambda m: m.solver, wm, wm.solver.batched())
         keys_s, theta_s, ep_s = shard_draws((keys, theta, effect_params), n, minimum=minimum)
         sig = jnp.asarray(sigma_raw, theta.dtype)
         ys, ok = _noisy_batch(wm, keys_s, theta_s, sig, jnp.asarray(v0_jitter, theta.dtype), ep_s)
