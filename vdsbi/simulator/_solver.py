@@ -42,10 +42,11 @@ class RK4(AbstractSolver):
 
     Attributes:
         dt: step, s, rounded to an integer fraction of the sample interval.
-        unroll: write the four stages out in the program (`batched`): a batched step costs
-            about 1.5× less on a CPU, for a program that takes 2–3× longer to trace and
-            compile. Otherwise one loop runs over the stages and substeps, so the model's
-            vector field appears once (fits and their derivatives, where compiling dominates).
+        unroll: write the four stages out in the program (`batched`, what `solve_batch`
+            uses): a batched step costs about 1.5× less on a CPU, for a program that takes
+            2–3× longer to trace and compile. Otherwise one loop runs over the stages and
+            substeps, so the model's vector field appears once: the layout of the fits, their
+            derivatives and a problem's draws, where compiling dominates.
     """
 
     dt: float = eqx.field(static=True, default=0.0025)
