@@ -165,9 +165,8 @@ def demo(
             # The diagnosis does not use the first identification, so it runs alongside it on
             # another thread: each spends much of its time compiling on one core.
             lines: list[str] = []
-            quiet = log is None
             diagnosing = in_background(
-                _diagnose, rec, veh, d, name, seed=seed, quiet=quiet, options=b.diagnose, log=lines.append
+                _diagnose, rec, veh, d, name, seed=seed, options=b.diagnose, log=lines.append
             )
         say(f"2/5 identify with the base model: {b.base_rounds} round(s) x {b.sims} simulations")
         # Flagged anyway: no point spending more rounds on it.
@@ -196,10 +195,10 @@ def _names(name: Path, folder: str) -> tuple[Path, Path, Path]:
     return name / "recording.csv", name / "vehicle.json", name / folder
 
 
-def _diagnose(rec, veh, d: Path, name: Path, *, seed: int, quiet: bool, options: dict, log) -> dict:
+def _diagnose(rec, veh, d: Path, name: Path, *, seed: int, options: dict, log) -> dict:
     """The diagnosis of the demo drive into d/diagnose, its progress lines to `log`; its report."""
     res = diagnose(
-        rec, veh, d / "diagnose", names=_names(name, "diagnose"), seed=seed, quiet=quiet, log=log, **options
+        rec, veh, d / "diagnose", names=_names(name, "diagnose"), seed=seed, quiet=False, log=log, **options
     )
     return res.report
 

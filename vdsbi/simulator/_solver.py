@@ -65,8 +65,6 @@ class RK4(AbstractSolver):
         h = inputs.dt / substeps
         # Classical RK4 in plain jnp (both autodiff modes work through it).
         f = lambda t, y: model.vector_field(t, y, args)
-        nodes = jnp.array([0.0, 0.5, 0.5, 1.0])
-        weights = jnp.array([1.0, 2.0, 2.0, 1.0])
 
         def rk4_step(t0, y, k1):
             k2 = f(t0 + 0.5 * h, y + (0.5 * h) * k1)
@@ -76,12 +74,15 @@ class RK4(AbstractSolver):
 
         def unrolled(t_k, y, k1):
             y = rk4_step(t_k, y, k1)
-            if substeps > 1:  # rolled: as fast as unrolled
+            if substeps > 1:  # the substeps in a loop: no slower than written out
                 step = lambda j, y: rk4_step(t_k + j * h, y, f(t_k + j * h, y))
                 y = jax.lax.fori_loop(1, substeps, step, y)
             return y
 
         def rolled(t_k, y, k1):
+            nodes = jnp.array([0.0, 0.5, 0.5, 1.0])
+            weights = jnp.array([1.0, 2.0, 2.0, 1.0])
+
             def stage(i, carry):
                 # Stage s of substep j; `y_j` is the state at the substep's start.
                 y_j, acc, k_prev = carry
