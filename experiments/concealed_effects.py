@@ -10,8 +10,10 @@ Generator (documented so the ranges can be judged):
     `default_vehicle()`;
   * θ: l_f U[0.4, 0.6]·L, h_cog U[0.35, 0.7] m, C_kappa U[8, 25] × static axle load,
     C_alpha U[5, 15] × static axle load (per axle, independently);
-  * maneuver: `random_profile` (20 s, 200 Hz), initial speed U[12, 25] m/s; draws in which the
-    car slows below 4 m/s or a wheel exceeds 250 rad/s are redrawn;
+  * maneuver: `random_profile` (20 s, 200 Hz), initial speed U[12, 25] m/s; where an effect that
+    acts only at speed is concealed (`FAST_EFFECTS`: downforce), U[35, 50] m/s with the steer
+    scaled to ask for up to 1.5 μ·g at that speed; draws in which the car slows below 4 m/s or a
+    wheel exceeds 250 rad/s are redrawn;
   * effects: each parameter from its effect's `typical` range; for ranges symmetric about 0
     the magnitude is U[a/3, a] with a random sign (the lower third is excluded so the effect is
     not vanishingly small), one-sided ranges U[low, high];
@@ -79,6 +81,13 @@ NOISE_RANGES = {
     "omega_rear": (0.05, 0.15),
     "vx": (0.02, 0.08),
 }
+
+
+#: Effects that act only at speed, and the initial speeds (m/s) of the drives that conceal them.
+FAST_EFFECTS, FAST_SPEEDS, SLOW_SPEEDS = ("downforce",), (35.0, 50.0), (12.0, 25.0)
+#: The fast drives' steer asks for up to this many μ·g at the initial speed (the slow drives'
+#: 0.06 rad would spin a car at 40 m/s), so they corner near the limit, where downforce acts.
+FAST_GRIP_ASKED = 1.5
 
 
 def draw_effect(rng, name):
@@ -154,8 +163,11 @@ def make_case(i: int, effects: tuple, seed: int, duration: float, folder: Path, 
         )
         params = {e: draw_effect(rng, e) for e in effects}
         key = jax.random.key(int(rng.integers(2**31)))
-        inputs = random_profile(key, duration)
-        v0 = float(rng.uniform(12, 25))
+        fast = any(e in FAST_EFFECTS for e in effects)
+        v0 = float(rng.uniform(*(FAST_SPEEDS if fast else SLOW_SPEEDS)))
+        # neutral steer: a_y ≈ v²·δ/L
+        steer = FAST_GRIP_ASKED * consts["friction"] * 9.81 * L / v0**2 if fast else 0.06
+        inputs = random_profile(key, duration, max_steer=steer)
         acting = inputs if kind is None else outside_physics.applied_inputs(kind, inputs)
         with jax.enable_x64(True), outside_physics.patched_tyres(kind, consts["mass"]):
             ys, ok = simulate(

@@ -69,3 +69,19 @@ def test_prior_reaches_the_grip_the_drive_used():
     fixed = dataclasses.replace(vehicle, prior={"tyre_friction.scale_rear": (0.5, 1.7)})
     assert high(prior_box(fixed, effects, grip=2.0)) == pytest.approx(1.7)
     assert prior_box(vehicle, (), grip=2.0) == prior_box(vehicle, ())
+
+
+@pytest.mark.parametrize("grip", [0.3, 0.8, 1.2, 2.0])
+def test_prior_floor_is_the_grip_the_drive_used(grip):
+    # The car pulled grip × μ·g on its weight alone: neither axle's factor may sit far below grip
+    # (per axle 0.9 × grip), whatever the effect's own lower bound; the box stays a box.
+    from vdsbi.problem import prior_box
+    from vdsbi.simulator import get_effect
+
+    eff = get_effect("tyre_friction")
+    box = prior_box(default_vehicle(), ("tyre_friction",), grip=grip)
+    for axle, (lo_own, _) in zip(eff.param_names, eff.bounds):
+        lo, hi = box[f"tyre_friction.{axle}"]
+        assert lo == pytest.approx(max(lo_own, eff.grip_floor * grip)) and lo >= 0.9 * grip - 1e-12
+        assert lo < hi
+    assert prior_box(default_vehicle(), ("tyre_friction",))["tyre_friction.scale_front"] == eff.bounds[0]

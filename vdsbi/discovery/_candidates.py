@@ -84,6 +84,8 @@ LOOKALIKE_GROUPS: tuple[tuple[str, ...], ...] = (
     ("signal_delay", "steering_lag", "torque_lag"),
     # each scales what the accelerometer reads or what drives it
     ("sensor_scale", "torque_gain", "imu_misalignment"),
+    # each raises the tyres' limit μ·F_z; only downforce's grows with speed²
+    ("tyre_friction", "downforce"),
 )
 
 

@@ -23,7 +23,9 @@ from ._problem import (
     LONGITUDINAL_MODES as LONGITUDINAL_MODES,
     Problem as Problem,
     ProblemSettings as ProblemSettings,
+    compared_speed as compared_speed,
     grip_used as grip_used,
+    top_speed as top_speed,
     yaw_at_zero_steer as yaw_at_zero_steer,
 )
 from ._simulate import (

@@ -29,23 +29,26 @@ def prior_box(
     overrides: Mapping[str, tuple[float, float]] | None = None,
     grip: float | None = None,
 ) -> dict[str, tuple[float, float]]:
-    """Uniform prior box: the vehicle's θ box, then each effect parameter's fit bounds widened to
-    hold its null value (what any car could have, not only the typical one); vehicle.json's
-    `prior`, then `overrides` (e.g. the ranges a diagnosis measured), replace any of them by full
-    name (``signal_delay.delay``).
+    """Uniform prior box: the vehicle's θ box, then each effect's prior bounds
+    (`AbstractEffect.prior_bounds`: its fit bounds widened to hold its null value, what any car
+    could have, unless the grip the drive used rules values out); vehicle.json's `prior`, then
+    `overrides` (e.g. the ranges a diagnosis measured), replace any of them by full name
+    (``signal_delay.delay``).
 
     `grip` is the share of vehicle.json's μ·g the drive uses (`grip_used`): an effect whose range
-    depends on it widens its bounds (`AbstractEffect.prior_bounds`) unless vehicle.json sets them.
+    depends on it moves its bounds unless vehicle.json sets them, told whether another of
+    `effects` loads the tyres beyond the car's weight (`AbstractEffect.adds_load`).
 
     Raises:
         ValueError: an override for an unknown parameter, or with low ≥ high.
     """
     box = dict(vehicle.default_prior())
-    for e in effects:
-        eff = get_effect(e)
-        for p, (lo, hi), null in zip(eff.param_names, eff.prior_bounds(grip), eff.null):
+    effs = {e: get_effect(e) for e in effects}
+    for e, eff in effs.items():
+        extra_load = any(other.adds_load for name, other in effs.items() if name != e)
+        for p, bounds in zip(eff.param_names, eff.prior_bounds(grip, extra_load)):
             name = f"{e}.{p}"
-            box[name] = tuple(float(v) for v in vehicle.prior.get(name, (min(lo, null), max(hi, null))))
+            box[name] = tuple(float(v) for v in vehicle.prior.get(name, bounds))
     for name, (lo, hi) in (overrides or {}).items():
         if name not in box:
             raise ValueError(f"prior for unknown parameter {name!r}; known: {', '.join(box)}")

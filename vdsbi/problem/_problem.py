@@ -3,8 +3,8 @@
 Everything downstream (`identify`, `diagnose`, `simulate --inputs`, `observability`, the CLI
 and the Python API) works on a `Problem` built by `make_problem` (in `_make`), so the windows,
 the noise model, the inputs, each window's initial state and the held-out part are decided there
-only. This module holds the `ProblemSettings` it takes, the `Problem` it returns and
-`grip_used`, read off a `Problem`.
+only. This module holds the `ProblemSettings` it takes, the `Problem` it returns and what is
+read off a `Problem`: its speed, the grip it uses and the yaw rate at a logged steer of zero.
 """
 
 from __future__ import annotations
@@ -239,11 +239,45 @@ class Problem:
         return min(self.t.shape[1], (k_end - 1) * self.factor + self.factor)
 
 
-def grip_used(problem: Problem) -> float | None:
+def compared_speed(problem: Problem) -> np.ndarray | None:
+    """(W, K) forward speed at the compared samples, m/s: the measured speed (speed mode), else
+    the vx channel, else the mean wheel speed × the free radius; None without any."""
+    k = problem.y.shape[1]
+    if problem.speed is not None:
+        return problem.speed[:, :: problem.factor][:, :k]
+    if "vx" in problem.channels:
+        return problem.y[..., problem.channels.index("vx")]
+    wheels = [problem.channels.index(c) for c in ("omega_front", "omega_rear") if c in problem.channels]
+    if wheels:
+        return problem.y[..., wheels].mean(-1) * problem.vehicle.wheel_radius
+    return None
+
+
+def top_speed(problem: Problem, quantile: float = 0.9) -> float | None:
+    """The speed the drive exceeds on a share 1 − `quantile` of its compared samples, m/s; None
+    without a speed (`compared_speed`)."""
+    speed = compared_speed(problem)
+    if speed is None:
+        return None
+    return float(np.quantile(speed[problem.train | problem.held], quantile))
+
+
+def grip_used(problem: Problem, min_speed: float = 0.0) -> float | None:
     """How much of the grip μ·g the drive uses: the 99th percentile of |a_y| over the compared
     samples (the filtered ay channel, else speed × yaw rate) over vehicle.json's μ·g; None
-    without a lateral channel. Above 0.5 Dugoff's tyre leaves its linear range."""
+    without a lateral channel. Above 0.5 Dugoff's tyre leaves its linear range.
+
+    With `min_speed` (m/s) > 0, only over the samples at least that fast (where downforce
+    would add grip): 0 where there are none, None also without a speed (`compared_speed`).
+    """
     mask = problem.train | problem.held
+    if min_speed > 0:
+        speed = compared_speed(problem)
+        if speed is None:
+            return None
+        mask = mask & (speed >= min_speed)
+        if not mask.any():
+            return 0.0
     if "ay" in problem.channels:
         lateral = problem.y[..., problem.channels.index("ay")][mask]
     elif "yaw_rate" in problem.channels and problem.speed is not None:

@@ -50,17 +50,17 @@ class TorqueDriven(AbstractVehicleModel):
     longitudinal: ClassVar[str] = "torque"
     measured_inputs: ClassVar[tuple[str, ...]] = ()
 
-    def _start(self, theta, inputs: Inputs, v0) -> tuple:
-        return (v0, *self.static_loads(theta))
+    def _start(self, theta, effect_params, inputs: Inputs, v0) -> tuple:
+        return (v0, *self.vertical_loads(theta, effect_params, v0))
 
     def _longitudinal(self, t, y, args: Args, cos_sin) -> Longitudinal:
         theta, effect_params, _ = args
         vx, vy, r, a_f_hat, a_r_hat, k_f_hat, k_r_hat = y[0], y[1], y[2], y[5], y[6], y[7], y[8]
         _, _, ckf, ckr, caf, car = (theta[i] for i in range(6))
         r_free = self.radius(effect_params)
-        fz_f0, fz_r0 = self.static_loads(theta)
+        loads0 = self.vertical_loads(theta, effect_params, vx)
         zero = jnp.zeros_like(vx)
-        ctx0 = self._context(y, r_free, fz_f0, fz_r0, zero)
+        ctx0 = self._context(y, r_free, *loads0, zero)
         fbx, fby, gx, gy = zero, zero, zero, zero
         for e, p in zip(self.effects, effect_params):
             bx, by = e.body_force(p, ctx0)
@@ -68,7 +68,8 @@ class TorqueDriven(AbstractVehicleModel):
             fbx, fby, gx, gy = fbx + bx, fby + by, gx + ax_g, gy + ay_g
         demands = (dugoff_demand(ckf, caf, k_f_hat, a_f_hat), dugoff_demand(ckr, car, k_r_hat, a_r_hat))
         mu = self.friction(effect_params)
-        fz_f, fz_r, fx_f, fy_f, fx_r, fy_r = self._loaded_tire_forces(theta, demands, mu, cos_sin, fbx)
+        forces = self._loaded_tire_forces(theta, loads0, demands, mu, cos_sin, fbx)
+        fz_f, fz_r, fx_f, fy_f, fx_r, fy_r = forces
         cos_d, sin_d = cos_sin
         a_x = (fx_f * cos_d - fy_f * sin_d + fx_r + fbx) / self.vehicle.mass
         ctx = self._context(y, r_free, fz_f, fz_r, zero)._replace(ax=a_x)
@@ -111,14 +112,15 @@ class TorqueDriven(AbstractVehicleModel):
             gravity=GRAVITY,
         )
 
-    def _loaded_tire_forces(self, theta, demands, mu, cos_sin, fbx):
+    def _loaded_tire_forces(self, theta, loads0, demands, mu, cos_sin, fbx):
         """Eq. 11 and the Dugoff forces solved together: ``(fz_f, fz_r, fx_f, fy_f, fx_r, fy_r)``.
 
-        The loads follow the specific force a_x (the seed's ± sign: load moves rearwards under
-        acceleration), which the tire forces make: a fixed point, `LOAD_ITERATIONS` passes.
+        The loads `loads0` at a_x = 0 (`vertical_loads`) follow the specific force a_x (the
+        seed's ± sign: load moves rearwards under acceleration), which the tire forces make: a
+        fixed point, `LOAD_ITERATIONS` passes.
         """
         m, L, h = self.vehicle.mass, self.vehicle.wheelbase, theta[1]
-        fz_f0, fz_r0 = self.static_loads(theta)
+        fz_f0, fz_r0 = loads0
         cos_d, sin_d = cos_sin
 
         def tire_forces(a_x):
@@ -165,9 +167,9 @@ class SpeedDriven(AbstractVehicleModel):
     longitudinal: ClassVar[str] = "speed"
     measured_inputs: ClassVar[tuple[str, ...]] = ("speed", "accel")
 
-    def _start(self, theta, inputs: Inputs, v0) -> tuple:
+    def _start(self, theta, effect_params, inputs: Inputs, v0) -> tuple:
         v0, _, a_x0 = inputs.longitudinal(inputs.t0)
-        return (v0, *self.loads(theta, a_x0))
+        return (v0, *self.loads(theta, effect_params, v0, a_x0))
 
     def _longitudinal(self, t, y, args: Args, cos_sin) -> Longitudinal:
         theta, effect_params, inputs = args
@@ -176,7 +178,7 @@ class SpeedDriven(AbstractVehicleModel):
         caf, car = theta[4], theta[5]
         r_free = self.radius(effect_params)
         # Eq. 11 with the measured specific force: no fixed point to solve.
-        fz_f, fz_r = self.loads(theta, a_x)
+        fz_f, fz_r = self.loads(theta, effect_params, vx, a_x)
         r_eff_f = self.effective_radius(r_free, fz_f)
         r_eff_r = self.effective_radius(r_free, fz_r)
         zero = jnp.zeros_like(vx)

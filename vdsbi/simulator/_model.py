@@ -58,7 +58,7 @@ class AbstractVehicleModel(eqx.Module):
     measured_inputs: eqx.AbstractClassVar[tuple[str, ...]]
 
     @abc.abstractmethod
-    def _start(self, theta, inputs: Inputs, v0) -> tuple:
+    def _start(self, theta, effect_params, inputs: Inputs, v0) -> tuple:
         """(Vx m/s, front load N, rear load N) at `inputs.t0`."""
 
     @abc.abstractmethod
@@ -118,9 +118,18 @@ class AbstractVehicleModel(eqx.Module):
         # Eq. 6 with R_l = R_f − F_z/C_vert: R_eff = R_f − F_z/(3·C_vert).
         return r_free - fz / (3.0 * self.vehicle.tire_vertical_stiffness)
 
-    def loads(self, theta, a_x):
-        """Axle loads (N) under the specific force a_x (m/s²), eq. 11."""
-        fz_f0, fz_r0 = self.static_loads(theta)
+    def vertical_loads(self, theta, effect_params, vx):
+        """Axle loads (N) at a_x = 0: the car's weight plus the effects' loads at Vx (m/s)."""
+        fz_f, fz_r = self.static_loads(theta)
+        weight = self.vehicle.mass * GRAVITY
+        for e, p in zip(self.effects, effect_params):
+            f, r = e.vertical_load(p, vx, weight)
+            fz_f, fz_r = fz_f + f, fz_r + r
+        return fz_f, fz_r
+
+    def loads(self, theta, effect_params, vx, a_x):
+        """Axle loads (N) at Vx (m/s) under the specific force a_x (m/s²), eq. 11."""
+        fz_f0, fz_r0 = self.vertical_loads(theta, effect_params, vx)
         shift = self.vehicle.mass * theta[1] * a_x / self.vehicle.wheelbase
         return fz_f0 - shift, fz_r0 + shift
 
@@ -144,7 +153,7 @@ class AbstractVehicleModel(eqx.Module):
         """
         r_free = self.radius(effect_params)
         u0 = inputs(inputs.t0)
-        v0, fzf, fzr = self._start(theta, inputs, v0)
+        v0, fzf, fzr = self._start(theta, effect_params, inputs, v0)
         v0 = jnp.asarray(v0, dtype=float)
         zero = jnp.zeros_like(v0)
         extra = [e.init_state(p, u0) for e, p in zip(self.effects, effect_params)]

@@ -2,6 +2,7 @@
 
 from ._aero_drag import AeroDrag as AeroDrag
 from ._base import AbstractEffect as AbstractEffect, Context as Context
+from ._downforce import Downforce as Downforce
 from ._imu_lever_arm import ImuLeverArm as ImuLeverArm
 from ._imu_misalignment import ImuMisalignment as ImuMisalignment
 from ._missing_terms import (
@@ -84,5 +85,6 @@ for _cls in (
     SensorScale,
     YawInertia,
     SteerOffset,
+    Downforce,
 ):
     register_effect(_cls)

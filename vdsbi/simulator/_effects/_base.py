@@ -46,7 +46,9 @@ class AbstractEffect(eqx.Module):
       they exist);
     - `start`: where a fit starts when the effect is switched on, strictly inside `bounds`.
     - `searched`: whether discovery's search includes it (default True).
-    - `prior_bounds`: `bounds` for a drive's prior box (default: as they are).
+    - `adds_load`: whether `vertical_load` can load the tyres beyond the car's weight
+      (default False): the grip a drive used then bounds no friction factor from below.
+    - `prior_bounds`: a drive's prior box (default: `bounds` widened to hold `null`).
 
     `register_effect` checks them. Hooks receive `p`, the effect's parameter vector.
     """
@@ -61,12 +63,15 @@ class AbstractEffect(eqx.Module):
     description: AbstractClassVar[str]
     num_states: ClassVar[int] = 0
     searched: ClassVar[bool] = True
+    adds_load: ClassVar[bool] = False
 
     @classmethod
-    def prior_bounds(cls, grip: float | None) -> tuple[tuple[float, float], ...]:
-        """`bounds` as the prior box of a drive that uses `grip` × vehicle.json's μ·g (None:
-        not known); an effect whose range depends on it says so here."""
-        return cls.bounds
+    def prior_bounds(cls, grip: float | None, extra_load: bool = False) -> tuple[tuple[float, float], ...]:
+        """The prior box of a drive that uses `grip` × vehicle.json's μ·g (None: not known):
+        `bounds` widened to hold `null` (what any car could have, not only a typical one). An
+        effect whose range depends on the grip says so here; `extra_load`: another enabled
+        effect loads the tyres beyond the car's weight (`adds_load`)."""
+        return tuple((min(lo, n), max(hi, n)) for (lo, hi), n in zip(cls.bounds, cls.null))
 
     def init_state(self, p, u0: Float[Array, "3"]) -> Float[Array, " S"]:
         return jnp.zeros(self.num_states)
@@ -81,6 +86,12 @@ class AbstractEffect(eqx.Module):
     def friction_scale(self, p) -> tuple[Float[Array, ""], Float[Array, ""]]:
         """Factors on the friction coefficient μ of the front and rear tyres."""
         return jnp.asarray(1.0), jnp.asarray(1.0)
+
+    def vertical_load(self, p, vx, weight: float) -> tuple[Float[Array, ""], Float[Array, ""]]:
+        """Extra vertical load on the front and rear axle at speed `vx` (m/s), N, beside the
+        car's weight `weight` = m·g (N): it loads the tyres (their limit μ·F_z and loaded
+        radius), not the IMU."""
+        return jnp.asarray(0.0), jnp.asarray(0.0)
 
     def yaw_inertia_scale(self, p) -> Float[Array, ""]:
         """Factor on the yaw inertia I_z = m·l_f·l_r."""
