@@ -136,16 +136,32 @@ def test_every_folder_has_a_report_page_and_names_no_temporary_folder(effect_run
     assert "sensor_bias.ax" in (effect_run / "report.html").read_text()
 
 
+def test_the_report_says_what_was_held_out_and_what_the_drive_determines(effect_run):
+    page = (effect_run / "report.html").read_text()
+    # Its overlay greys the held-out part; its header says so.
+    assert "none held out" not in page and "the last 30% of each held out" in page
+    assert "understeer gradient" in page and "steady-state yaw-rate gain at" in page
+    post = json.loads((effect_run / "posterior.json").read_text())
+    # Pairs that trade are named as pairs, and neither member is identified alone.
+    for pair in post["combinations"]["trading_pairs"]:
+        assert abs(pair["correlation"]) >= 0.9 and set(pair["direction"]) == set(pair["pair"])
+        for a, b in (pair["pair"], pair["pair"][::-1]):
+            assert post["parameters"][a]["identified"] is False and b in post["parameters"][a]["trades_with"]
+    # Nor is one its prior box holds: an interval over 80 % of the box, an estimate on a bound.
+    for p in post["parameters"].values():
+        lo, hi = p["prior"]
+        spans = p["q95"] - p["q05"] >= 0.8 * (hi - lo)
+        on_bound = min(p["estimate"] - lo, hi - p["estimate"]) <= 0.05 * (hi - lo)
+        assert not ((spans or on_bound) and p["identified"]), p
+
+
 def test_export_autoware_keys_as_the_mpc_lateral_controller_reads_them(effect_run, tmp_path):
     import yaml
 
     from vdsbi.simulator import default_vehicle
 
-    # The keys and units on the run's own numbers; a run whose drive leaves C_α or l_f unidentified
-    # is refused by export (below), so the file here marks them identified.
+    # The keys and units on the run's own numbers.
     post = json.loads((effect_run / "posterior.json").read_text())
-    for n in ("l_f", "C_alpha_f", "C_alpha_r"):
-        post["parameters"][n]["identified"] = True
     # What the drive says about the steer signal travels as comments.
     like = post["parameters"]["l_f"]
     post["parameters"]["signal_delay.delay"] = like | {"estimate": 0.123, "q05": 0.1, "q95": 0.15}
@@ -173,15 +189,36 @@ def test_export_autoware_keys_as_the_mpc_lateral_controller_reads_them(effect_ru
     assert "offset = -0.00123 [-0.00200, 0.00000] rad" in text
 
 
-def test_export_refuses_a_parameter_the_drive_did_not_identify(effect_run, tmp_path, capsys):
+def test_export_writes_an_unidentified_stiffness_whose_estimate_predicts_the_held_out_part(
+    effect_run, tmp_path, capsys
+):
+    import yaml
+
     post = json.loads((effect_run / "posterior.json").read_text())
-    post["parameters"]["C_alpha_f"]["identified"] = False
+    assert post["validation"]["estimate"]["channels"]  # the run held its last 30 % out
+    car = post["parameters"]["C_alpha_r"]
+    car |= {"identified": False, "not_identified_because": "trades with l_f along a ridge (ρ = +0.93)"}
     run = tmp_path / "run"
     run.mkdir()
     (run / "posterior.json").write_text(json.dumps(post))
-    assert main(["export", str(run), "--format", "autoware", "--out", str(tmp_path / "a.yaml")]) == 2
-    assert "C_alpha_f: not identified" in capsys.readouterr().err
-    assert not (tmp_path / "a.yaml").exists()
+    assert main(["export", str(run), "--format", "autoware", "--out", str(tmp_path / "a.yaml")]) == 0
+    text = (tmp_path / "a.yaml").read_text()
+    v = yaml.safe_load(text)["/**"]["ros__parameters"]["vehicle"]
+    assert v["cr"] == pytest.approx(car["estimate"], abs=1e-3)
+    assert v["cf"] == pytest.approx(post["parameters"]["C_alpha_f"]["estimate"], abs=1e-3)
+    assert "(rear axle); NOT identified alone: trades with l_f along a ridge (ρ = +0.93)" in text
+    assert "Held-out check passed" in text and "understeer gradient = " in text
+    # json and csv: a number, beside identified.
+    capsys.readouterr()
+    assert main(["export", str(run), "--format", "json", "--out", "-"]) == 0
+    row = json.loads(capsys.readouterr().out)["parameters"]["C_alpha_r"]
+    assert row["value"] == car["estimate"] and row["identified"] is False
+    # Nothing held out to check it on: refused, with what to do.
+    (run / "posterior.json").write_text(json.dumps(post | {"validation": {}}))
+    assert main(["export", str(run), "--format", "autoware", "--out", str(tmp_path / "b.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert "C_alpha_r: not identified by this drive alone" in err and "--holdout 0.3" in err
+    assert not (tmp_path / "b.yaml").exists()
 
 
 def test_export_json_and_csv_carry_every_parameter_with_its_interval(effect_run, tmp_path, capsys):
@@ -194,8 +231,9 @@ def test_export_json_and_csv_carry_every_parameter_with_its_interval(effect_run,
     rows = pd.read_csv(io.StringIO(capsys.readouterr().out)).set_index("parameter")
     for n, p in post["parameters"].items():
         assert rows.loc[n, "q05"] == pytest.approx(p["q05"], rel=1e-5)
-        want = table[n]["value"]
-        assert (want is None) if p.get("identified") is False else want == pytest.approx(p["estimate"])
+        # Every parameter's estimate, identified or not: what `predict` simulates.
+        assert table[n]["value"] == pytest.approx(p["estimate"])
+        assert table[n]["identified"] == p["identified"] and rows.loc[n, "identified"] == p["identified"]
 
 
 def test_export_bad_input_exits_2(tmp_path, capsys):

@@ -8,6 +8,13 @@ single-track model (its lateral equation divides cf + cr by the whole mass), so 
 unconverted, in N/rad. Autoware has no l_f: its dynamics model derives
 l_f = L·(1 − m_front/m) from the corner masses, so vdsbi writes mass_fl = mass_fr = m·l_r/(2L) and
 mass_rl = mass_rr = m·l_f/(2L), which give back vdsbi's l_f exactly (and its I_z = m·l_f·l_r).
+
+What is written. Every format carries identify's estimate of every parameter — what `predict`
+simulates — beside whether the drive identifies it alone: a parameter set assembled from the
+identified values and something else predicts worse than either. The Autoware file is written
+when the estimate predicts the run's held-out part (`held_out_verdict`), or, with nothing held
+out, when the drive identifies l_f and both cornering stiffnesses; the intervals, the
+combinations the drive determines and the pairs that trade travel as comments.
 """
 
 from __future__ import annotations
@@ -16,11 +23,13 @@ import csv
 import io
 import json
 import os
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from ..io import InputError
+from ._held_out import HeldOutVerdict, held_out_verdict
 
 EXPORT_FORMATS = ("autoware", "json", "csv")
 #: What each format's file is called.
@@ -66,8 +75,9 @@ def export(
         vehicle: mass and wheelbase (default: those posterior.json recorded).
 
     Raises:
-        InputError: unknown format, no result in `run_dir`, l_f or a stiffness not identified
-            (autoware), or no vehicle mass/wheelbase.
+        InputError: unknown format, no result in `run_dir`, no vehicle mass/wheelbase, or
+            (autoware) an estimate that fails the held-out part, or one not identified by a run
+            that held nothing out to check it on.
     """
     if fmt not in EXPORT_FORMATS:
         raise InputError(
@@ -82,40 +92,56 @@ def export(
 
 
 def _table(post: Mapping[str, Any]) -> dict[str, Any]:
-    """Per parameter: value (identify's estimate), std, 5/95 % quantiles, unit, identified."""
-    rows = {
-        n: {
-            "value": None if p.get("identified") is False else _value(p),
+    """Per parameter: value (identify's estimate, identified or not), std, 5/95 % quantiles, unit,
+    identified and why not; beside them the combinations the drive determines and the held-out
+    verdict."""
+    rows = {}
+    for n, p in post["parameters"].items():
+        rows[n] = {
+            "value": _value(p),
             "std": p["std"],
             "q05": p["q05"],
             "q95": p["q95"],
             "unit": p["unit"],
             "identified": p.get("identified", True),
         }
-        for n, p in post["parameters"].items()
+        if "not_identified_because" in p:
+            rows[n]["not_identified_because"] = p["not_identified_because"]
+    return {
+        "recording": post["recording"],
+        "effects": post.get("effects", []),
+        "parameters": rows,
+        "combinations": post.get("combinations", {}),
+        "held_out": held_out_verdict(post).to_dict(),
     }
-    return {"recording": post["recording"], "effects": post.get("effects", []), "parameters": rows}
 
 
 def _csv(table: Mapping[str, Any]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     keys = ("value", "std", "q05", "q95")
-    w.writerow(["parameter", *keys, "unit", "identified"])
+    w.writerow(["parameter", *keys, "unit", "identified", "not_identified_because"])
     for n, r in table["parameters"].items():
-        w.writerow([n, *("" if r[k] is None else f"{r[k]:.6g}" for k in keys), r["unit"], r["identified"]])
+        why = r.get("not_identified_because", "")
+        w.writerow([n, *(f"{r[k]:.6g}" for k in keys), r["unit"], r["identified"], why])
     return buf.getvalue()
+
+
+#: The parameters the Autoware file's keys carry.
+EXPORTED = ("l_f", "C_alpha_f", "C_alpha_r")
 
 
 def autoware(post: Mapping[str, Any], vehicle: Mapping[str, Any] | None, run_dir: Path) -> str:
     """A ROS 2 parameter file (YAML) with `vehicle.cf`, `vehicle.cr` and `vehicle.mass_fl/_fr/_rl/_rr`
-    as Autoware's mpc_lateral_controller reads them with `vehicle_model_type: dynamics`."""
+    as Autoware's mpc_lateral_controller reads them with `vehicle_model_type: dynamics`.
+
+    Raises:
+        InputError: the estimate fails the held-out part, or nothing was held out and one of
+            l_f, C_alpha_f, C_alpha_r is not identified; no vehicle mass/wheelbase.
+    """
     params = post["parameters"]
-    missing = [n for n in ("l_f", "C_alpha_f", "C_alpha_r") if params[n].get("identified") is False]
-    if missing:
-        raise InputError(
-            run_dir / "posterior.json", missing[0], "not identified by this drive: nothing to export"
-        )
+    verdict = held_out_verdict(post)
+    _check_exportable(post, verdict, run_dir)
     if not vehicle or not {"mass", "wheelbase"} <= set(vehicle):
         raise InputError(run_dir / "posterior.json", "vehicle", "no mass/wheelbase recorded; pass --vehicle")
     m, L = float(vehicle["mass"]), float(vehicle["wheelbase"])
@@ -128,15 +154,21 @@ def autoware(post: Mapping[str, Any], vehicle: Mapping[str, Any] | None, run_dir
     head = [
         f"# Identified by vdsbi {post.get('vdsbi_version', '?')} from {post['recording']}",
         f"# (identify folder {run_dir}; effects in the model: {effects}).",
-        "# Estimates (the best fit of the drive); 90 % posterior intervals [q05, q95]:",
-        f"#   vehicle.cf = C_alpha_f {_interval(caf, '.1f')} N/rad (front axle, both tyres: no conversion)",
-        f"#   vehicle.cr = C_alpha_r {_interval(car, '.1f')} N/rad (rear axle)",
-        f"#   l_f = {_interval(lf, '.4f')} m (CoG to front axle; wheelbase {L:g} m, mass {m:g} kg)",
+        _held_out_note(verdict),
+        "# Estimates (the best fit of the drive: what `vdsbi predict` simulates); 90 % posterior",
+        "# intervals [q05, q95], each parameter's own, and whether the drive identifies it alone:",
+        f"#   vehicle.cf = C_alpha_f {_interval(caf, '.1f')} N/rad (front axle, both tyres: no conversion);"
+        f" {_status(caf)}",
+        f"#   vehicle.cr = C_alpha_r {_interval(car, '.1f')} N/rad (rear axle); {_status(car)}",
+        f"#   l_f = {_interval(lf, '.4f')} m (CoG to front axle; wheelbase {L:g} m, mass {m:g} kg);"
+        f" {_status(lf)}",
         f"#   mass_fl = mass_fr = m*l_r/(2L) = {front} kg [{lo['mass_fl']:.1f}, {hi['mass_fl']:.1f}]",
         f"#   mass_rl = mass_rr = m*l_f/(2L) = {rear} kg [{hi['mass_rl']:.1f}, {lo['mass_rl']:.1f}]",
         "#   (Autoware derives l_f = L*(1 - (mass_fl + mass_fr)/m) from these: the value above.)",
     ]
+    head += _combination_notes(post)
     head += _steering_notes(params)
+    head += _other_notes(params)
     head += [f"# WARNING: {w['message']}" for w in post.get("warnings", [])]
     body = [
         "/**:",
@@ -148,6 +180,100 @@ def autoware(post: Mapping[str, Any], vehicle: Mapping[str, Any] | None, run_dir
         f"      cr: {_value(car):.3f}",
     ]
     return "\n".join(head + body) + "\n"
+
+
+def _check_exportable(post: Mapping[str, Any], verdict: HeldOutVerdict, run_dir: Path) -> None:
+    """Refuse, with what to do, an estimate that fails the held-out part, or one that nothing held
+    out checks and the drive does not identify alone."""
+    source = run_dir / "posterior.json"
+    if verdict.scored and not verdict.passed:
+        raise InputError(
+            source,
+            "validation",
+            f"the estimate fails the held-out part ({'; '.join(verdict.failures)}): a controller would "
+            f"inherit that error; {_diagnose_hint(post)}, or identify again with more --sims or "
+            "another --seed",
+        )
+    if verdict.scored:
+        return
+    params = post["parameters"]
+    for n in EXPORTED:
+        if params[n].get("identified") is False:
+            why = params[n].get("not_identified_because", "")
+            raise InputError(
+                source,
+                n,
+                f"not identified by this drive alone{f' ({why})' if why else ''}, and no held-out part "
+                "was scored to check that the estimate predicts driving it never saw: rerun identify "
+                "with --holdout 0.3",
+            )
+
+
+def _diagnose_hint(post: Mapping[str, Any]) -> str:
+    """The run's own `vdsbi diagnose` command (its warnings name it), else the advice to run one."""
+    for w in post.get("warnings", []):
+        found = re.search(r"`(vdsbi diagnose [^`]*)`", w.get("message", ""))
+        if found:
+            return f"run `{found.group(1)}` to find what the model lacks"
+    return "run `vdsbi diagnose` on the drive to find what the model lacks"
+
+
+def _held_out_note(verdict: HeldOutVerdict) -> str:
+    if not verdict.scored:
+        return (
+            "# Held-out check: none (identify ran with --holdout 0); written because the drive "
+            "identifies l_f, C_alpha_f and C_alpha_r."
+        )
+    return f"# Held-out check passed: the fit of the training part predicted the {verdict.describe()}."
+
+
+def _combination_notes(post: Mapping[str, Any]) -> list[str]:
+    """Comments for what the drive determines: the understeer gradient, the steady-state yaw-rate
+    gain (95 % intervals) and the pairs that trade along a ridge."""
+    comb = post.get("combinations") or {}
+    notes = []
+    for key, name in (
+        ("understeer_gradient", "understeer gradient"),
+        ("yaw_rate_gain", "steady-state yaw-rate gain"),
+    ):
+        c = comb.get(key)
+        if not c:
+            continue
+        at = f" at {c['at']:g} m/s" if c.get("at") else ""
+        told = "" if "identified" not in c else ("; identified" if c["identified"] else "; not identified")
+        notes.append(
+            f"#   {name}{at} = {c['median']:.4g} [{c['q025']:.4g}, {c['q975']:.4g}] {c['unit']} (95 %){told}"
+        )
+    units = {n: p["unit"] for n, p in post["parameters"].items()}
+    for pair in comb.get("trading_pairs", []):
+        a, b = pair["pair"]
+        step = " with ".join(f"{pair['direction'][n]:+.4g} {units.get(n, '')} of {n}" for n in (a, b))
+        notes.append(
+            f"#   {a} and {b} trade along a ridge (ρ = {pair['correlation']:+.2f}): {step} leaves the fit "
+            "about unchanged; the drive determines them together, not each alone"
+        )
+    return ["# What the drive determines (steady state, single-track model):", *notes] if notes else []
+
+
+def _other_notes(params: Mapping[str, Any]) -> list[str]:
+    """Comments for the rest of the estimate: Autoware has no key for it, and `predict` simulates it."""
+    shown = {*EXPORTED, "signal_delay.delay", "steer_offset.offset"}
+    rest = [n for n in params if n not in shown]
+    if not rest:
+        return []
+    lines = ["# The rest of the estimate (no Autoware key; part of what `vdsbi predict` simulates):"]
+    for n in rest:
+        p = params[n]
+        lines.append(f"#   {n} = {_interval(p, '.4g')} {p['unit']}; {_status(p)}")
+    return lines
+
+
+def _status(p: Mapping[str, Any]) -> str:
+    """Whether the drive identifies a parameter alone, and why not."""
+    if p.get("identified") is False:
+        why = p.get("not_identified_because")
+        return f"NOT identified alone: {why}" if why else "NOT identified alone"
+    return "identified, moved by model error" if "model_error" in p else "identified"
 
 
 def _steering_notes(params: Mapping[str, Any]) -> list[str]:

@@ -33,13 +33,17 @@ def run_summary(full: Problem, samples, fit, state, run_info: dict, box: Box, ef
     estimate (its best fit), the noise model, what the drive cannot inform and what it does."""
     import jax
 
-    from ..diagnostics import determined_directions, vehicle_combinations
+    from ..diagnostics import determined_directions, trading_pairs, vehicle_combinations
 
     names = box.names
     bounds = {n: (float(a), float(b)) for n, a, b in zip(names, box.low, box.high)}
     params = summarise(samples, bounds, names, parameter_units(effects))
     informed = np.asarray(fit.sample(jax.random.key(2), len(samples), information_only=True), float)
-    _flag(params, fit, box, np.std(informed, axis=0))
+    informed_std = np.std(informed, axis=0)
+    _flag(params, fit, box, informed_std)
+    # The ridge is read where the identifiability rule reads: the drive's information alone.
+    pairs = trading_pairs(fit.cov_information, names, informed_std)
+    _flag_box_and_ridges(params, box, pairs)
     speed = full.speed if full.speed is not None else np.broadcast_to(full.v0[:, None], full.t.shape)
     rms_speed = float(np.sqrt(np.mean(np.asarray(speed)[:, :: full.factor][full.train] ** 2)))
     prior = np.random.default_rng(0).uniform(box.low, box.high, (4000, box.dim))
@@ -69,7 +73,10 @@ def run_summary(full: Problem, samples, fit, state, run_info: dict, box: Box, ef
         "noise_model": fit.noise.to_dict(),
         "not_identified": [n for n in names if params[n]["identified"] is False],
         "combinations": vehicle_combinations(samples, names, veh, rms_speed, prior, informed)
-        | {"determined_directions": determined_directions(samples, prior, names, fit.free)},
+        | {
+            "determined_directions": determined_directions(samples, prior, names, fit.free),
+            "trading_pairs": pairs,
+        },
         "effects": list(effects),
         "problem": full.summary(),
         "channels": list(full.channels),
@@ -80,8 +87,9 @@ def run_summary(full: Problem, samples, fit, state, run_info: dict, box: Box, ef
 
 
 def _flag(params: dict, fit, box: Box, informed_std) -> None:
-    """Each parameter's estimate, `identified` and why not, and `model_error` where it applies, in
-    `params` (`summarise`'s, whose std is the reported posterior's).
+    """Each parameter's estimate, `std_ratio_to_prior` (the information-only std over the prior's),
+    `identified` and why not, and `model_error` where it applies, in `params` (`summarise`'s,
+    whose std is the reported posterior's).
 
     Identified by what the drive informs (the information-only spread, before model error widens
     the interval): a parameter the data pin down stays identified, with an interval that says the
@@ -94,6 +102,7 @@ def _flag(params: dict, fit, box: Box, informed_std) -> None:
         p = params[n]
         ratio, widened = float(informed_std[i]) / prior_std, p["std"] / prior_std
         p["estimate"] = float(fit.theta[i])
+        p["std_ratio_to_prior"] = ratio
         p["identified"] = bool(n in fit.free and ratio <= MAX_STD_RATIO)
         if n not in fit.free:
             p["not_identified_because"] = "the channels do not depend on it in this mode"
@@ -110,6 +119,35 @@ def _flag(params: dict, fit, box: Box, informed_std) -> None:
                 f"the model error the fit measured widens its interval to {widened:.0%} of its prior std: "
                 "the model lacks something that moves it"
             )
+
+
+def _flag_box_and_ridges(params: dict, box: Box, pairs) -> None:
+    """Not identified, beyond what the information says: a parameter the prior box holds
+    (`held_by_box`: its interval spans the box, or its estimate sits on a bound), and both
+    members of a pair that trades along a ridge (`trading_pairs`), each naming its partner.
+    The box's reasons are given only where the information had none (a parameter the drive does
+    not inform spans its box by that alone); a ridge's partner is always named."""
+    from ..diagnostics import held_by_box
+
+    for i, n in enumerate(box.names):
+        p = params[n]
+        if p["identified"]:
+            why = held_by_box(p["estimate"], p["q05"], p["q95"], float(box.low[i]), float(box.high[i]))
+            _not_identified(p, why)
+    for pair in pairs:
+        a, b = pair["pair"]
+        rho = pair["correlation"]
+        for me, other in ((a, b), (b, a)):
+            params[me].setdefault("trades_with", []).append(other)
+            _not_identified(params[me], [f"trades with {other} along a ridge (ρ = {rho:+.2f})"])
+
+
+def _not_identified(p: dict, reasons) -> None:
+    if not reasons:
+        return
+    first = [p["not_identified_because"]] if "not_identified_because" in p else []
+    p["identified"] = False
+    p["not_identified_because"] = "; ".join(first + list(reasons))
 
 
 def npe_check(npe_samples: np.ndarray, checked) -> dict[str, Any]:
@@ -149,6 +187,7 @@ def validation_report(prob: Problem, checked, npe_samples: np.ndarray, effects, 
         "npe_mean": _score(prob, npe_samples.mean(0), effects),
         "what": "fitted on the training part, scored on the held-out part; the exported estimate "
         "is then refit on all the driving",
+        "split": prob.summary().get("how", ""),
     }
     if compare:
         unknown = [k for k in compare if k not in names]
@@ -166,6 +205,8 @@ def run_warnings(
 ) -> list[dict[str, Any]]:
     """posterior.json's `warnings`: mass piled at the prior's edges, or a predictive band that
     misses the recording, each pointing to `vdsbi diagnose`."""
+    from ..diagnostics import MAX_STD_RATIO
+
     rec, veh, out = (n if isinstance(n, (str, os.PathLike)) else None for n in names)
     if rec is None:
         rec = summary["recording"]
@@ -183,7 +224,9 @@ def run_warnings(
             samples,
             list(summary["parameters"]),
             bounds,
-            summary["not_identified"],
+            # Only what the drive does not inform: a parameter the box holds is what the edge
+            # warning is for.
+            [n for n, p in summary["parameters"].items() if p["std_ratio_to_prior"] > MAX_STD_RATIO],
             coverage,
             command,
         )

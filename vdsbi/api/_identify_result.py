@@ -41,30 +41,38 @@ class IdentifyResult:
     predictive: np.ndarray | None = None
 
     def table(self) -> str:
-        """Per parameter: the estimate (the best fit, what `export` writes), the posterior's std and
-        5/50/95 % quantiles; a parameter the drive cannot inform is printed as "not identified"
-        with its prior range, one the model error moves is marked; then the combinations the drive
-        determines and the warnings."""
+        """Per parameter: the estimate (the best fit, what `export` writes and `predict` simulates),
+        the posterior's std and 5/50/95 % quantiles; a parameter the drive does not identify alone
+        is marked so with its prior range and the reason (no information, held by the prior box,
+        or trading with another along a ridge), one the model error moves is marked; then the
+        combinations the drive determines, the pairs that trade, and the warnings."""
         width = max(10, *(len(n) for n in self.summary["parameters"]))
         rows = [f"{'param':<{width}} {'estimate':>11} {'std':>10} {'q05':>11} {'q50':>11} {'q95':>11}"]
         for name, p in self.summary["parameters"].items():
+            note = "  (moved by model error)" if "model_error" in p else ""
             if p.get("identified") is False:
                 lo, hi = p["prior"]
-                rows.append(f"{name:<{width}} not identified by this drive (prior {lo:.4g} .. {hi:.4g})")
-                continue
+                why = p.get("not_identified_because", "")
+                note = f"  NOT identified alone (prior {lo:.4g} .. {hi:.4g}){': ' + why if why else ''}"
             rows.append(
                 f"{name:<{width}} {p['estimate']:>11.4g} {p['std']:>10.3g} "
-                f"{p['q05']:>11.4g} {p['q50']:>11.4g} {p['q95']:>11.4g}"
-                + ("  (moved by model error)" if "model_error" in p else "")
+                f"{p['q05']:>11.4g} {p['q50']:>11.4g} {p['q95']:>11.4g}{note}"
             )
-        for key, c in self.summary.get("combinations", {}).items():
-            if key == "determined_directions":
+        combinations = self.summary.get("combinations", {})
+        for key, c in combinations.items():
+            if key in ("determined_directions", "trading_pairs"):
                 continue
             at = f" at {c['at']} m/s" if c.get("at") else ""
             told = "" if c.get("identified", True) else " (not identified: near its prior spread)"
             rows.append(
                 f"{key.replace('_', ' ')}{at}: {c['median']:.4g} {c['unit']} "
                 f"[95 %: {c['q025']:.4g} .. {c['q975']:.4g}]{told}"
+            )
+        for pair in combinations.get("trading_pairs", ()):
+            a, b = pair["pair"]
+            rows.append(
+                f"{a} and {b} trade along a ridge (ρ = {pair['correlation']:+.2f}): "
+                "the drive determines them together, not each alone"
             )
         rows += [f"WARNING: {w['message']}" for w in self.summary.get("warnings", ())]
         return "\n".join(rows)

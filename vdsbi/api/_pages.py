@@ -9,6 +9,7 @@ from typing import Any
 
 from ..simulator import PARAM_UNITS
 from . import _html as H
+from ._held_out import held_out_verdict
 from .plots import display_unit
 
 #: Files `identify` leaves beside its page.
@@ -32,23 +33,95 @@ def fmt(value: float | None, unit: str = "") -> str:
 
 
 def parameter_rows(params: Mapping[str, Any]) -> list[list[str]]:
-    """Rows name, unit, estimate, std, 90 % interval, prior."""
+    """Rows name, unit, estimate, std, 90 % interval, prior, identified: every estimate (what
+    `export` writes and `predict` simulates), and whether the drive identifies it alone."""
     rows = []
     for n, p in params.items():
         u = p["unit"]
         lo, hi = p["prior"]
         row = [n, display_unit(u)[1], fmt(p.get("estimate", p["mean"]), u), fmt(p["std"], u)]
-        if p.get("identified") is False:
-            row[2:4] = ["not identified", "–"]
-            row.append("–")
-        else:
-            row.append(f"[{fmt(p['q05'], u)}, {fmt(p['q95'], u)}]")
+        row.append(f"[{fmt(p['q05'], u)}, {fmt(p['q95'], u)}]")
         row.append(f"[{fmt(lo, u)}, {fmt(hi, u)}]")
-        rows.append(row)
+        rows.append([*row, identified_cell(p)])
     return rows
 
 
-PARAM_HEADER = ["parameter", "unit", "estimate", "std", "90 % interval", "prior"]
+def identified_cell(p: Mapping[str, Any]) -> str:
+    if p.get("identified") is False:
+        why = p.get("not_identified_because")
+        return f"no: {why}" if why else "no"
+    return "yes, moved by model error" if "model_error" in p else "yes"
+
+
+PARAM_HEADER = ["parameter", "unit", "estimate", "std", "90 % interval", "prior", "identified alone"]
+
+
+def combination_rows(summary: Mapping[str, Any]) -> list[list[str]]:
+    """Rows quantity, estimate, 95 % interval, unit, identified: the understeer gradient and the
+    steady-state yaw-rate gain the drive determines."""
+    comb = summary.get("combinations") or {}
+    names = {"understeer_gradient": "understeer gradient", "yaw_rate_gain": "steady-state yaw-rate gain"}
+    rows = []
+    for key, name in names.items():
+        c = comb.get(key)
+        if not c:
+            continue
+        at = f" at {c['at']:g} m/s" if c.get("at") else ""
+        told = "–" if "identified" not in c else ("yes" if c["identified"] else "no: near its prior spread")
+        rows.append([name + at, fmt(c["median"]), f"[{fmt(c['q025'])}, {fmt(c['q975'])}]", c["unit"], told])
+    return rows
+
+
+def trading_pair_lines(summary: Mapping[str, Any]) -> list[str]:
+    """One sentence per pair of parameters that trade along a ridge, with the step along it."""
+    params = summary["parameters"]
+    lines = []
+    for pair in (summary.get("combinations") or {}).get("trading_pairs", []):
+        a, b = pair["pair"]
+        step = " with ".join(
+            f"{pair['direction'][n] * display_unit(params[n]['unit'])[0]:+.3g} "
+            f"{display_unit(params[n]['unit'])[1]} of {n}"
+            for n in (a, b)
+        )
+        lines.append(
+            f"{a} and {b} trade along a ridge (ρ = {pair['correlation']:+.2f}): {step} leaves the fit "
+            "about unchanged. The drive determines them together, not each alone."
+        )
+    return lines
+
+
+def data_split(summary: Mapping[str, Any]) -> str:
+    """How the estimate was fitted and how it was validated: the estimate is the fit of all the
+    usable driving, the validation a fit of the training part scored on the held-out part (the
+    grey part of the fit figure)."""
+    problem = summary["problem"]
+    windows = len(problem.get("windows", ()))
+    seconds = problem.get("train_seconds", 0)
+    fitted = f"the estimate fits all the usable driving ({seconds:g} s fitted in {windows} window(s))"
+    val = summary.get("validation") or {}
+    if not val:
+        return f"{fitted}; nothing held out to validate on"
+    split = val.get("split") or "the last part of the usable driving held out"
+    held = val.get("estimate", {}).get("held_out_seconds")
+    held = "" if held is None else f", {held:g} s"
+    return (
+        f"{fitted}; validated before that by a fit of the rest, scored on the held-out part "
+        f"({split}{held}; grey below)"
+    )
+
+
+def held_out_block(summary: Mapping[str, Any]) -> str:
+    """Whether the estimate predicts the held-out part, by the rule `export` applies."""
+    verdict = held_out_verdict(summary)
+    if not verdict.scored:
+        return ""
+    if verdict.passed:
+        return H.paragraph(f"The estimate predicts the {verdict.describe()}: `vdsbi export` writes it.", "ok")
+    return H.paragraph(
+        f"The estimate fails the held-out part ({'; '.join(verdict.failures)}): `vdsbi export --format "
+        "autoware` refuses it.",
+        "warn",
+    )
 
 
 def warnings_block(summary: Mapping[str, Any]) -> str:
@@ -102,15 +175,20 @@ def identify_page(summary: Mapping[str, Any], folder: str | os.PathLike, also: S
         f"vdsbi identify: {summary['recording']}",
         [
             H.paragraph(
-                f"Effects in θ: {effects}; {summary['problem'].get('how', '')}; channels "
-                f"{', '.join(summary['channels'])}."
+                f"Effects in θ: {effects}; {data_split(summary)}; channels {', '.join(summary['channels'])}."
             ),
             warnings_block(summary),
             H.heading("Posterior"),
             H.table(PARAM_HEADER, parameter_rows(summary["parameters"])),
+            H.heading("What the drive determines"),
+            H.table(
+                ["quantity", "estimate", "95 % interval", "unit", "identified"], combination_rows(summary)
+            ),
+            *(H.paragraph(line, "warn") for line in trading_pair_lines(summary)),
             H.figure(folder / "pairplot.png", "Posterior pair plot over the prior box."),
             H.heading("Fit to the recording"),
             H.table(validation_header(summary), validation_rows(summary)),
+            held_out_block(summary),
             H.figure(
                 folder / "ppc.png",
                 "Recording over the posterior-predictive median and 90 % band; grey: held out.",

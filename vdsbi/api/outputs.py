@@ -104,8 +104,19 @@ def plot_posterior(
         box=[params[n]["prior"] for n in names],
         units=[params[n]["unit"] for n in names],
         reference=pick(given),
-        faded=[params[n].get("identified") is False for n in names],
+        faded=[_uninformed(params[n]) for n in names],
     )
+
+
+def _uninformed(p: Mapping[str, Any]) -> bool:
+    """The drive does not inform the parameter (its posterior is the prior's): grey in the pair
+    plot. One the box holds, or one of a pair that trades, stays in colour: its ridge is the
+    picture."""
+    from ..diagnostics import MAX_STD_RATIO
+
+    if "std_ratio_to_prior" not in p:
+        return p.get("identified") is False
+    return p["std_ratio_to_prior"] > MAX_STD_RATIO
 
 
 def write_export(run_dir: str | os.PathLike, fmt: str, out: str | os.PathLike | None = None, **kw) -> Path:

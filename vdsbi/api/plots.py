@@ -94,7 +94,7 @@ def pairplot(
     legend = ["blue: posterior (contours hold 50 / 90 %)"]
     legend += ["red: truth"] if truth is not None else []
     legend += ["green: reference"] if reference is not None else []
-    legend += ["grey: not identified by the drive"] if faded is not None and any(faded) else []
+    legend += ["grey: not informed by the drive"] if faded is not None and any(faded) else []
     legend += ["axes span the prior box"] if box is not None else []
     fig.text(0.98, 0.98, "\n".join(legend), ha="right", va="top", fontsize=9)
     if title is not None:

@@ -28,7 +28,11 @@ from ._fisher import (
     score_fisher_mc as score_fisher_mc,
 )
 from ._fisher_report import fisher_report as fisher_report, report_markdown as report_markdown
-from ._identifiability import MAX_STD_RATIO as MAX_STD_RATIO, identifiability as identifiability
+from ._identifiability import (
+    MAX_STD_RATIO as MAX_STD_RATIO,
+    held_by_box as held_by_box,
+    identifiability as identifiability,
+)
 from ._least_squares import (
     FitResult as FitResult,
     LeastSquaresResult as LeastSquaresResult,
@@ -49,3 +53,4 @@ from ._misspecification import (
     locate_mismatch as locate_mismatch,
     misspecification_test as misspecification_test,
 )
+from ._ridges import trading_pairs as trading_pairs

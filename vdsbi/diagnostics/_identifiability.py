@@ -1,4 +1,5 @@
-"""What a drive can and cannot tell: per-parameter identifiability from the Fisher information.
+"""What a drive can and cannot tell: per-parameter identifiability from the Fisher information,
+and the prior box's own say (`held_by_box`).
 
 The Fisher information of θ over a problem's fitted samples (Jacobian by forward-mode autodiff
 through the simulator and the shared filter) plus the prior's own precision gives a Laplace
@@ -15,6 +16,10 @@ Correlated noise: the compared samples are low-passed, so neighbouring residuals
 correlated; the information is scaled by the effective-sample factor (1 − ρ)/(1 + ρ) of the
 filtered noise's lag-1 autocorrelation ρ (computed from the filter taps), so it is not
 overstated.
+
+The box: an estimate the information calls determined is still not the drive's when its 90 %
+interval spans (nearly) the whole prior box, or when it sits on a bound of the box (the bound,
+not the data, holds it; e.g. an inertia standing in for a lag the model lacks).
 """
 
 from __future__ import annotations
@@ -32,6 +37,29 @@ from ._fisher import fisher_from_jacobian
 
 #: Posterior std over prior std above which a parameter is reported as not identified.
 MAX_STD_RATIO = 0.5
+#: A 90 % interval spanning at least this share of the prior box excludes little of it (a
+#: uniform prior's own spans 0.9).
+SPAN_SHARE = 0.8
+#: An estimate within this share of the box's width from a bound sits on it: the logit
+#: coordinates' prior pulls a bound-held MAP a few per cent inside.
+BOUND_SHARE = 0.05
+
+
+def held_by_box(estimate: float, q05: float, q95: float, low: float, high: float) -> list[str]:
+    """Why the prior box rather than the drive holds a parameter (empty when it does not): its
+    90 % interval [q05, q95] spans at least `SPAN_SHARE` of [low, high], or its estimate lies
+    within `BOUND_SHARE` of the width from a bound."""
+    width = high - low
+    reasons = []
+    if q95 - q05 >= SPAN_SHARE * width:
+        reasons.append(f"its 90 % interval spans {(q95 - q05) / width:.0%} of its prior box")
+    for side, bound in (("lower", low), ("upper", high)):
+        if abs(estimate - bound) <= BOUND_SHARE * width:
+            reasons.append(
+                f"its estimate {estimate:.4g} sits on the {side} bound of its prior box "
+                f"[{low:.4g}, {high:.4g}]: the bound holds it"
+            )
+    return reasons
 
 
 def filtered_noise_rho(problem: Problem) -> float:

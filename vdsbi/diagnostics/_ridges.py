@@ -1,0 +1,73 @@
+"""Pairs of parameters that trade along a ridge of the likelihood: the drive determines a
+combination of the two, not each alone.
+
+A steering lag and the yaw-inertia index both slow the yaw response; a friction factor and a
+cornering stiffness both set the lateral force near the limit. Where the data fix only their
+combination, the posterior of the pair is a long, thin ellipse: the two are strongly correlated,
+and each one's std given the other is a small part of its own std (σ_i·√(1 − ρ²): below 0.44·σ_i
+at |ρ| ≥ 0.9). The ridge matters only where it is long: two parameters pinned to a few per cent of
+their prior each (l_f and C_αr on a clean drive often correlate at 0.9) are determined one by
+one, and only share their error.
+
+Coordinates: the box's logit coordinates (`vdsbi.problem.Box`), in which the likelihood
+posterior is Gaussian and a bound does not squeeze the ridge (an inertia index held at the top
+of its box still moves far along it in z).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from jaxtyping import Float
+
+#: |ρ| at or above which two parameters move along one ridge.
+RIDGE_CORRELATION = 0.9
+#: Each member's std over its prior std at or above which the ridge is long enough to leave it
+#: undetermined alone.
+RIDGE_MIN_RATIO = 0.2
+#: A uniform prior's std in the box's logit coordinates (the logistic distribution's).
+UNIFORM_LOGIT_STD = float(np.pi / np.sqrt(3.0))
+WHAT = (
+    "the two move together along this step (each by its std) with the fit barely changed: the drive "
+    "determines their combination, not each alone"
+)
+
+
+def trading_pairs(
+    cov: Float[np.ndarray, "P P"],
+    names: Sequence[str],
+    step: Float[np.ndarray, " P"],
+    prior_std: float | Float[np.ndarray, " P"] = UNIFORM_LOGIT_STD,
+) -> list[dict]:
+    """The pairs of parameters that trade along a ridge of the posterior, most correlated first.
+
+    Args:
+        cov: posterior covariance in coordinates that map each parameter on its own (default:
+            the box's logit coordinates, e.g. `LikelihoodPosterior.cov_information`).
+        names: parameter names, `cov`'s order.
+        step: each parameter's posterior std in its own units, for the step along the ridge.
+        prior_std: each parameter's prior std in `cov`'s coordinates.
+
+    Returns:
+        [{"pair": [a, b], "correlation": ρ, "direction": {a: step_a, b: ±step_b}, "what"}]: a
+        pair trades when |ρ| ≥ `RIDGE_CORRELATION` and each member's std is at least
+        `RIDGE_MIN_RATIO` of its prior std. "direction" is one step along the ridge in parameter
+        units: each member by its std, b's sign that of ρ; the fit barely changes along it.
+    """
+    cov = np.asarray(cov, float)
+    step = np.asarray(step, float)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    long = (sd > 0) & (sd >= RIDGE_MIN_RATIO * np.broadcast_to(prior_std, sd.shape))
+    out = []
+    for i in range(len(names)):
+        for j in range(i + 1, len(names)):
+            if not (long[i] and long[j]):
+                continue
+            rho = float(cov[i, j] / (sd[i] * sd[j]))
+            if abs(rho) < RIDGE_CORRELATION:
+                continue
+            a, b = names[i], names[j]
+            direction = {a: float(step[i]), b: float(np.sign(rho) * step[j])}
+            out.append({"pair": [a, b], "correlation": round(rho, 3), "direction": direction, "what": WHAT})
+    return sorted(out, key=lambda p: -abs(p["correlation"]))
