@@ -32,6 +32,7 @@ from ..problem import (
 )
 from ..simulator import SpeedDriven, model_class, release_compiled_programs
 from ._default_effects import default_effects
+from ._extrapolation import held_out_extrapolation
 from ._identify_report import npe_check, ppc_summary, run_summary, run_warnings, validation_report
 from ._identify_result import IdentifyResult
 from ._progress import Progress
@@ -194,6 +195,7 @@ def _result(
     summary["validation"] = validation_report(prob, checked, npe_samples, effects, compare)
     draws, _ = screened_sample(k_val, checked, prob, ppc_draws, effects, information_only=True)
     band = predictive_band(k_band, prob, draws, checked.noise.scale, effects)
+    band = held_out_extrapolation(summary, k_band, prob, full, band, draws, checked.noise.scale, effects)
     summary["ppc"] = ppc_summary(prob, band)
     summary["warnings"] = run_warnings(samples, summary, box, names, longitudinal)
     # Its own key: the exported draws are not the validation band's draws of another fit.

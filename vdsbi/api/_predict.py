@@ -1,5 +1,6 @@
 """`predict`: another recording of the car, simulated at an identify run's estimate with its effects
-(and, on request, the posterior-predictive 90 % band) — the code the run's own held-out score uses."""
+(and, on request, the posterior-predictive 90 % band) — the code the run's own held-out score uses —
+with the windows that go beyond the driving the estimate was fitted on."""
 
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ from ..problem import (
 )
 from ..simulator import Vehicle, get_effect
 from ._export import load_run
+from ._extrapolation import extrapolation
 from .outputs import PREDICTIVE
 
 
@@ -29,22 +31,29 @@ class PredictResult:
     """A recording predicted.
 
     Attributes:
-        frame: one row per compared sample of every usable window: `t`, `window`, then per channel
-            the measured value, the prediction and (with the band) its 5 % and 95 % quantiles.
+        frame: one row per compared sample of every usable window: `t`, `window`,
+            `beyond_envelope` (its window goes beyond the fitted driving), then per channel the
+            measured value, the prediction and (with the band) its 5 % and 95 % quantiles.
         scores: {channel: {nrmse, rmse, chi2_dof, samples}} of the prediction over those samples.
         coverage: {channel: share of measured samples inside the 90 % band} (empty without it).
+        extrapolation: the windows beyond the envelope of the driving the estimate was fitted on
+            (`vdsbi.problem.beyond_envelope`; with the band, those whose grip was drawn from its
+            prior say so), or None where the run stores no envelope.
     """
 
     frame: pd.DataFrame
     scores: dict
     coverage: dict
+    extrapolation: list[dict] | None = None
 
 
 def predict(
     run_dir: str | os.PathLike, inputs, *, band: bool = False, draws: int = 100, seed: int = 0
 ) -> PredictResult:
     """Simulate the recording `inputs` at `run_dir`'s estimate, window by window, each from its own
-    measured state, as `identify` scores its held-out part.
+    measured state, as `identify` scores its held-out part. Windows beyond the envelope of the
+    driving the run was fitted on are flagged, and their band draws the grip from its prior
+    (`extrapolation`).
 
     Raises:
         InputError: no identify run in `run_dir`, or a recording the run's settings cannot take.
@@ -66,21 +75,28 @@ def predict(
     if not ok:
         raise InputError(rec.source, "inputs", "the model leaves its domain at the estimate")
     mask = prob.valid
-    coverage, q = {}, None
+    q = samples = noise = None
+    key = jax.random.key(seed)
     if band:
-        samples = pd.read_csv(Path(run_dir) / PREDICTIVE)[names].to_numpy()
+        samples = pd.read_csv(Path(run_dir) / PREDICTIVE)[names].to_numpy()[:draws]
         noise = np.array([post["noise_model"][c]["residual_rms"] for c in prob.channels])
-        q = predictive_band(jax.random.key(seed), prob, samples[:draws], noise, effects)
-        coverage = band_coverage(prob, q, mask)
+        q = predictive_band(key, prob, samples, noise, effects)
+    fitted = (post.get("envelope") or {}).get("peaks")
+    flagged = None
+    if fitted is not None:
+        # Its own key: the widened band's draws are not the band's.
+        q, flagged = extrapolation(jax.random.fold_in(key, 1), prob, mask, fitted, q, samples, noise, effects)
+    coverage = {} if q is None else band_coverage(prob, q, mask)
     w_idx, k_idx = np.nonzero(mask)
-    cols = {"t": prob.t_out[w_idx, k_idx], "window": w_idx}
+    beyond = np.isin(w_idx, [f["window"] for f in flagged or ()])
+    cols = {"t": prob.t_out[w_idx, k_idx], "window": w_idx, "beyond_envelope": beyond}
     for i, c in enumerate(prob.channels):
         cols[c] = prob.y[w_idx, k_idx, i]
         cols[f"{c}_predicted"] = pred[w_idx, k_idx, i]
         if q is not None:
             cols[f"{c}_q05"] = q["q05"][w_idx, k_idx, i]
             cols[f"{c}_q95"] = q["q95"][w_idx, k_idx, i]
-    return PredictResult(pd.DataFrame(cols), channel_scores(prob, pred, mask), coverage)
+    return PredictResult(pd.DataFrame(cols), channel_scores(prob, pred, mask), coverage, flagged)
 
 
 def _effect_values(values: np.ndarray, names: list[str], effects) -> dict:

@@ -2,6 +2,12 @@
 
 from ._box import Box as Box
 from ._concat import concat_problems as concat_problems
+from ._envelope import (
+    ENVELOPE_UNITS as ENVELOPE_UNITS,
+    beyond_envelope as beyond_envelope,
+    envelope as envelope,
+    window_peaks as window_peaks,
+)
 from ._limit import slides as slides
 from ._make import longitudinal_mode as longitudinal_mode, make_problem as make_problem
 from ._measured import (
