@@ -45,12 +45,12 @@ from vdsbi.diagnostics import (  # noqa: E402
     design_maneuver,
     design_problem,
     fisher_report,
-    gauss_newton_fit,
     model_fisher,
     report_markdown,
     score_fisher_mc,
 )
 from vdsbi.diagnostics._fisher import scaled_mean_fn  # noqa: E402
+from vdsbi.estimation import laplace_covariance, levenberg_marquardt  # noqa: E402
 from vdsbi.simulator import (  # noqa: E402
     CHANNELS,
     PARAM_NAMES,
@@ -96,15 +96,17 @@ def identification(key, model, inputs, v0, fisher, num_seeds, num_iters=12):
     eps = jax.random.normal(key, (num_seeds, *mu.shape))
     xs = mu + fisher.std * eps
     z0 = jnp.ones(6)  # Table I nominal in scaled units (the truth is 0.87–1.45 of it)
-    fit = jax.jit(jax.vmap(lambda x: gauss_newton_fit(mean, x, fisher.std, z0, num_iters=num_iters)))
-    res = fit(xs)
-    z = np.asarray(res.z)
-    cost = np.asarray(res.cost)
+    def one(x):
+        fn = lambda z: ((mean(z) - x) / fisher.std).reshape(-1)
+        sol = levenberg_marquardt(fn, z0, max_steps=num_iters, rtol=0.0, damping=1e-3)
+        return sol.z, sol.cost, laplace_covariance(sol.jacobian)
+
+    z, cost, cov_z = (np.asarray(a) for a in jax.jit(jax.vmap(one))(xs))
     theta = z * np.asarray(fisher.scale)
     # A fit that ended far from the data (cost ≫ its expectation T·C/2) is a failed fit.
     n_data = mu.size
     good = cost < 0.5 * n_data * 1.5
-    laplace = np.sqrt(np.einsum("kpp->kp", np.asarray(res.cov_z))) * np.asarray(fisher.scale)
+    laplace = np.sqrt(np.einsum("kpp->kp", cov_z)) * np.asarray(fisher.scale)
     return {
         "num_seeds": num_seeds,
         "num_converged": int(good.sum()),

@@ -19,11 +19,12 @@ LAYERS: dict[str, int] = {
     "simulator": 0,
     "io": 1,
     "problem": 2,
-    "inference": 3,
-    "diagnostics": 4,
-    "discovery": 5,
-    "api": 6,
-    "cli": 7,
+    "estimation": 3,
+    "inference": 4,
+    "diagnostics": 5,
+    "discovery": 6,
+    "api": 7,
+    "cli": 8,
 }
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import shlex
 from pathlib import Path
 
 import numpy as np
@@ -26,8 +27,6 @@ from vdsbi.simulator import (
 
 NOISE = {"ax": 0.05, "ay": 0.05, "yaw_rate": 0.005, "omega_front": 0.1, "omega_rear": 0.1, "vx": 0.05}
 BIAS = {"ax": 0.3, "ay": -0.25, "yaw_rate": 0.0}
-#: Enough to learn the ax bias.
-WITH_EFFECT = "--rounds 2 --sims 200 --epochs 30 --samples 500 --quiet".split()
 
 
 @pytest.fixture(scope="module")
@@ -51,24 +50,29 @@ def biased(tmp_path_factory) -> tuple[Path, Path]:
     return d / "rec.csv", d / "vehicle.json"
 
 
-def _identify(rec: Path, veh: Path, out: Path, *extra: str) -> dict:
-    assert main(["identify", str(rec), "--vehicle", str(veh), "--out", str(out), *extra]) == 0
-    return json.loads((out / "posterior.json").read_text())
-
-
 @pytest.fixture(scope="module")
-def effect_run(biased, tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("loop") / "with_bias"
-    _identify(*biased, out, *WITH_EFFECT, "--effects", "sensor_bias")
-    return out
+def effect_run(diagnosis) -> Path:
+    """The identify command diagnose printed, pasted into the command line as it was printed
+    (`--quiet` only silences it) and run to the end."""
+    _, printed = diagnosis
+    argv = shlex.split(printed.strip().splitlines()[-1])
+    assert argv[0] == "vdsbi"
+    assert main([*argv[1:], "--quiet"]) == 0
+    return Path(argv[argv.index("--out") + 1])
 
 
-def test_identify_with_the_effect_recovers_the_bias(effect_run):
+def test_the_printed_identify_command_runs_and_recovers_the_bias(effect_run, diagnosis):
     post = json.loads((effect_run / "posterior.json").read_text())
     assert post["effects"] == ["sensor_bias"]
     params = post["parameters"]
-    for ch in ("ax", "ay"):
-        assert params[f"sensor_bias.{ch}"]["prior"] == [-2.0, 2.0]  # the effect's fit bounds
+    # The priors are the ranges the diagnosis measured and printed.
+    _, printed = diagnosis
+    argv = shlex.split(printed.strip().splitlines()[-1])
+    priors = [argv[i + 1] for i, a in enumerate(argv) if a == "--prior"]
+    assert priors
+    for item in priors:
+        name, rng = item.split("=")
+        assert params[name]["prior"] == pytest.approx([float(v) for v in rng.split(":")])
     # ax's bias is what this 3 s drive determines (the ay bias trades against the start state).
     p = params["sensor_bias.ax"]
     assert p["q05"] <= BIAS["ax"] <= p["q95"], p

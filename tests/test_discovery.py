@@ -114,8 +114,11 @@ def test_pairs_pay_a_prior_penalty_and_ranking_agrees_with_choice():
 
     from vdsbi.discovery import choose, rank
 
-    def fit(chi2, k):
-        return SimpleNamespace(chi2=chi2, num_params=6 + k, num_samples=10_000)
+    def fit(chi2, k, tau=1.0):
+        # one channel whose evidence is the white-noise χ² difference at τ = 1
+        noise = SimpleNamespace(tau=np.array([tau]), samples=np.array([10_000.0]))
+        rss = np.array([np.exp(chi2 / 10_000)])
+        return SimpleNamespace(chi2=chi2, rss=rss, noise=noise, num_params=6 + k, num_samples=10_000)
 
     base = fit(1000.0, 0)
     half_log_n = 0.5 * np.log(10_000)
@@ -131,3 +134,9 @@ def test_pairs_pay_a_prior_penalty_and_ranking_agrees_with_choice():
     assert ranked[0].effects == ("a", "b") and choose(ranked, True) == ("a", "b")
     assert choose(ranked, False) == ()
     assert sum(r.probability for r in ranked) == pytest.approx(1.0)
+    # The same gain on a residual correlated over 40 samples (model error on a real drive) is
+    # worth 40 times fewer independent samples: no longer strong evidence.
+    coloured = {(): fit(1000.0, 0, tau=40.0), ("a",): fit(900.0, 1, tau=40.0)}
+    row = next(r for r in rank(coloured, coloured[()]) if r.effects == ("a",))
+    assert row.log_bayes_factor == pytest.approx(50.0 / 40.0 - 0.5 * np.log(10_000 / 40.0))
+    assert choose(rank(coloured, coloured[()]), True) == ()

@@ -19,9 +19,17 @@ def _fake_fits(explained: dict[str, float], extra: dict[frozenset, float] | None
     def fit_fn(effects, z0):
         gain = sum(explained.get(e, 0.0) for e in effects)
         gain += sum(v for k, v in extra.items() if k <= set(effects))
-        return SimpleNamespace(chi2=5000.0 - gain, num_params=6 + len(effects), num_samples=N, z=None)
+        return _fit(5000.0 - gain, len(effects))
 
     return fit_fn, fit_fn((), None)
+
+
+def _fit(chi2: float, k: int, tau: float = 1.0) -> SimpleNamespace:
+    """A fit of one channel of N samples whose evidence is the white-noise χ² difference when
+    τ = 1 (½·N·ln(RSS ratio) with RSS = exp(χ²/N))."""
+    noise = SimpleNamespace(tau=np.array([tau]), samples=np.array([float(N)]))
+    rss = np.array([np.exp(chi2 / N)])
+    return SimpleNamespace(chi2=chi2, rss=rss, noise=noise, num_params=6 + k, num_samples=N, z=None)
 
 
 def _chi2_for(log_evidence: float) -> float:

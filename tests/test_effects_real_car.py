@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vdsbi.diagnostics import levenberg_marquardt
+from vdsbi.estimation import levenberg_marquardt
 from vdsbi.simulator import (
     CHANNELS,
     PARAM_NAMES,

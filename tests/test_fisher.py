@@ -11,14 +11,12 @@ from vdsbi.diagnostics import (
     fisher_from_jacobian,
     fisher_information,
     fisher_report,
-    gauss_newton_fit,
-    laplace_covariance,
-    levenberg_marquardt,
     model_fisher,
     noise_std,
     score_fisher_mc,
 )
 from vdsbi.diagnostics._fisher import scaled_mean_fn
+from vdsbi.estimation import laplace_covariance, levenberg_marquardt
 from vdsbi.simulator import (
     CHANNELS,
     PARAM_NAMES,
@@ -149,20 +147,6 @@ def test_rank_decision_detects_a_null_direction(x64):
     assert np.isinf(rep["crb_std"]["a"]) and np.isinf(rep["crb_std"]["b"])
     w = rep["weakest_direction"]
     assert abs(abs(w["a"]) - abs(w["b"])) < 1e-9 and w["a"] * w["b"] < 0
-
-
-def test_gauss_newton_fit_recovers_linear_model(x64, getkey):
-    # On a linear model LM converges in one step to the least-squares answer with cov = F⁻¹.
-    a = jax.random.normal(getkey(), (50, 2, 3))
-    std = jnp.full((50, 2), 0.1)
-    z_true = jnp.array([1.0, -2.0, 0.5])
-    mean = lambda z: jnp.einsum("tcp,p->tc", a, z)
-    x = mean(z_true) + std * jax.random.normal(getkey(), (50, 2))
-    fit = gauss_newton_fit(mean, x, std, jnp.zeros(3), num_iters=4, damping=1e-9)
-    w = (a / std[..., None]).reshape(-1, 3)
-    z_ls = np.linalg.lstsq(w, (x / std).reshape(-1), rcond=None)[0]
-    np.testing.assert_allclose(fit.z, z_ls, rtol=1e-6)
-    np.testing.assert_allclose(fit.cov_z, np.linalg.inv(fisher_information(mean, z_true, std)), rtol=1e-9)
 
 
 def test_levenberg_marquardt_with_prior_is_ridge_and_compiles_once(x64, getkey):

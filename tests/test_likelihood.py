@@ -4,7 +4,7 @@ Laplace covariance."""
 import numpy as np
 import pytest
 
-from vdsbi.diagnostics import fit_likelihood
+from vdsbi.estimation import ModelError, fit_likelihood
 from vdsbi.io import build_recording
 from vdsbi.problem import (
     Box,
@@ -53,7 +53,9 @@ def test_the_fit_recovers_the_stiffnesses_from_a_poor_start_and_its_interval_hol
     box = Box.from_dict(prior_box(veh), PARAM_NAMES)
     start = THETA.copy()
     start[4:] *= 0.7
-    post = fit_likelihood(prob, start, box, free=("C_alpha_f", "C_alpha_r"), reweights=1, max_steps=20)
+    post = fit_likelihood(
+        prob, start, box, free=("C_alpha_f", "C_alpha_r"), noise=ModelError(passes=1), max_steps=20
+    )
     assert post.free == ("C_alpha_f", "C_alpha_r")
     np.testing.assert_allclose(post.theta[:4], start[:4], rtol=1e-3)  # fixed ones stay
     for name, truth in zip(PARAM_NAMES[4:], THETA[4:]):
@@ -76,9 +78,9 @@ def test_a_wrong_start_speed_is_corrected_per_window_and_leaves_the_estimate_whe
     box = Box.from_dict(prior_box(veh), PARAM_NAMES)
     free = ("C_alpha_f", "C_alpha_r")  # the neighbouring tests' fits: one compilation
     prob = make_problem(_drive(), veh, settings)
-    right = fit_likelihood(prob, THETA, box, free=free, reweights=1, max_steps=20)
+    right = fit_likelihood(prob, THETA, box, free=free, noise=ModelError(passes=1), max_steps=20)
     biased = dataclasses.replace(prob, v0=prob.v0 + 0.5)
-    high = fit_likelihood(biased, THETA, box, free=free, reweights=1, max_steps=20)
+    high = fit_likelihood(biased, THETA, box, free=free, noise=ModelError(passes=1), max_steps=20)
     fitted = np.asarray(prob.train).any(1)
     assert fitted.sum() >= 2 and np.all(right.v0_offset[~fitted] == 0.0)
     np.testing.assert_allclose(high.v0_offset[fitted] - right.v0_offset[fitted], -0.5, atol=0.05)
@@ -102,7 +104,7 @@ def test_the_start_speed_columns_of_the_jacobian_come_from_one_tangent(x64):
     import jax
     import jax.numpy as jnp
 
-    from vdsbi.diagnostics._likelihood_start_speed import residual_and_jacobian
+    from vdsbi.estimation._start_speed import residual_and_jacobian
 
     x = jnp.asarray(np.random.default_rng(0).standard_normal((5, 2)))
     # Window w's five residuals depend on the two shared coordinates and on its own correction.
@@ -114,7 +116,7 @@ def test_the_start_speed_columns_of_the_jacobian_come_from_one_tangent(x64):
 
 
 def test_marginalising_the_start_speeds_leaves_the_theta_block_of_the_joint_covariance():
-    from vdsbi.diagnostics._likelihood_start_speed import V0_STD, profiled
+    from vdsbi.estimation._start_speed import V0_STD, profiled
 
     rng = np.random.default_rng(2)
     W, K, C, P = 3, 7, 2, 4
@@ -164,7 +166,7 @@ def _halves(rng, shift, prec):
 
 
 def test_halves_that_share_one_theta_rarely_widen_and_a_moved_half_is_caught():
-    from vdsbi.diagnostics._likelihood_widening import JOINT_LEVEL, consistent_covariance, tempered
+    from vdsbi.estimation._widening import JOINT_LEVEL, consistent_covariance, tempered
 
     rng = np.random.default_rng(0)
     prec = np.full(3, 5.0)  # a prior strong enough that leaving its gradient out would show
@@ -184,7 +186,7 @@ def test_halves_that_share_one_theta_rarely_widen_and_a_moved_half_is_caught():
 
 
 def test_tempering_divides_the_data_information_and_leaves_the_prior():
-    from vdsbi.diagnostics._likelihood_widening import tempered
+    from vdsbi.estimation._widening import tempered
 
     rng = np.random.default_rng(1)
     x = rng.standard_normal((200, 3))
@@ -205,7 +207,7 @@ def test_the_parameters_a_drive_informs_are_those_its_channels_depend_on(x64):
     import jax
     import jax.numpy as jnp
 
-    from vdsbi.diagnostics._likelihood import _informed
+    from vdsbi.estimation._likelihood import _informed
     from vdsbi.problem import split_parameters, windowed_model
 
     veh = default_vehicle()
@@ -224,20 +226,20 @@ def test_the_parameters_a_drive_informs_are_those_its_channels_depend_on(x64):
 
 
 def test_a_starting_noise_model_must_be_of_the_problems_channels():
-    from vdsbi.diagnostics._likelihood import NoiseModel
+    from vdsbi.estimation._likelihood import NoiseModel
 
     veh = default_vehicle()
     prob = make_problem(_drive(duration=8.0), veh, ProblemSettings(longitudinal="speed", max_window=6.0))
     box = Box.from_dict(prior_box(veh), PARAM_NAMES)
     other = NoiseModel(("ax",), np.ones(1), np.ones(1), np.ones(1), np.ones(1))
     with pytest.raises(ValueError, match="noise model"):
-        fit_likelihood(prob, THETA, box, noise=other)
+        fit_likelihood(prob, THETA, box, noise=ModelError(start=other))
 
 
 def test_prediction_draws_from_the_information_and_the_intervals_from_the_widened_covariance(getkey):
     import jax
 
-    from vdsbi.diagnostics import LikelihoodPosterior, NoiseModel
+    from vdsbi.estimation import LikelihoodPosterior, NoiseModel
 
     box = Box(np.array([0.0, 0.0]), np.array([1.0, 1.0]), ("a", "b"))
     info = np.array([[0.04, 0.01], [0.01, 0.09]])
@@ -259,13 +261,15 @@ def test_the_screen_keeps_a_quadratic_posterior_and_cuts_draws_past_a_wall(x64, 
     # the draws the likelihood allows, about as spread as the real posterior.
     import equinox as eqx
 
-    from vdsbi.diagnostics import screened_sample
+    from vdsbi.estimation import screened_sample
 
     veh = default_vehicle()
     settings = ProblemSettings(longitudinal="torque", max_window=6.0, channels=("ay", "yaw_rate"))
     prob = make_problem(_drive(), veh, settings)
     box = Box.from_dict(prior_box(veh), PARAM_NAMES)
-    post = fit_likelihood(prob, THETA, box, free=("C_alpha_f", "C_alpha_r"), reweights=1, max_steps=20)
+    post = fit_likelihood(
+        prob, THETA, box, free=("C_alpha_f", "C_alpha_r"), noise=ModelError(passes=1), max_steps=20
+    )
     draws, kept = screened_sample(getkey(), post, prob, 256)
     assert draws.shape == (256, len(PARAM_NAMES)) and kept > 0.9, kept
     i = PARAM_NAMES.index("C_alpha_f")
@@ -280,7 +284,7 @@ def test_the_screen_keeps_a_quadratic_posterior_and_cuts_draws_past_a_wall(x64, 
 def test_a_delay_the_model_lacks_moves_the_transient_half_against_the_steady_one():
     from types import SimpleNamespace
 
-    from vdsbi.diagnostics._likelihood_widening import consistent_covariance, data_splits
+    from vdsbi.estimation._widening import consistent_covariance, data_splits
 
     # One gain fitted to a lateral response that lags its input by 0.1 s: steady cornering
     # (a plateau) says the gain is 1, the fast slalom says less; noise 0.02.

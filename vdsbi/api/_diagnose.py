@@ -12,6 +12,16 @@ from ._commands import identify_command, measured_priors
 from ._pages import diagnose_page
 
 
+def not_claimed(chosen, priors, verdict: str) -> str:
+    """What a diagnosis found but does not claim: the effects with the ranges it measured, and
+    what remains."""
+    ranges = ", ".join(f"{n} in [{lo:.4g}, {hi:.4g}]" for n, (lo, hi) in priors.items())
+    return (
+        f"found {' + '.join(chosen)}" + (f" ({ranges})" if ranges else "") + ", but modelling it does not "
+        f"improve the held-out fit, so no identify command is given as the fix; {verdict}"
+    )
+
+
 def diagnose(
     recording,
     vehicle,
@@ -23,7 +33,9 @@ def diagnose(
     """`vdsbi.discovery.diagnose_mismatch` (imported on first use: it pulls in the discovery layer), with
     `report["identify_command"]`: the `vdsbi identify … --effects NAMES --prior …` that models the
     effects it chose, with prior ranges around the values it measured (`measured_priors`),
-    written into report.json and report.md; report.html shows the tables and figures.
+    written into report.json and report.md; report.html shows the tables and figures. Where the
+    chosen effects do not improve the held-out fit there is no command (None), and
+    `report["not_claimed"]` says what was found, with its ranges, and what remains.
 
     Args:
         recording, vehicle, out_dir, **options: as `vdsbi.discovery.diagnose_mismatch`.
@@ -41,8 +53,13 @@ def diagnose(
     chosen = found.report["chosen"]
     rep = found.report
     priors = measured_priors(chosen, rep.get("effect_params", {}), rep.get("effect_params_std", {}))
-    command = identify_command(rec, veh, out, chosen, options.get("longitudinal", "auto"), priors)
-    found = dataclasses.replace(found, report={**found.report, "identify_command": command})
+    if chosen and not found.verdict.held_out_improved:
+        # Modelling it does not predict the held-out part better: no command to run as the fix.
+        extra = {"identify_command": None, "not_claimed": not_claimed(chosen, priors, found.verdict.text)}
+    else:
+        command = identify_command(rec, veh, out, chosen, options.get("longitudinal", "auto"), priors)
+        extra = {"identify_command": command}
+    found = dataclasses.replace(found, report={**found.report, **extra})
     if out_dir is not None:
         plots = options.get("plots", getattr(options.get("settings"), "plots", True))
         write_report(found, Path(out_dir), plots=plots)

@@ -27,8 +27,8 @@ class IdentifyResult:
         validation: the problem whose held-out part the band and the validation scores are on
             (`problem` itself when nothing is held out).
         predictive: (ppc_draws, P) parameter draws for predicting other driving at the estimate
-            (`vdsbi.diagnostics.LikelihoodPosterior.predictive_draws`, held against the likelihood by
-            `vdsbi.diagnostics.screened_sample`), what `predict --band` uses.
+            (`vdsbi.estimation.LikelihoodPosterior.predictive_draws`, held against the likelihood by
+            `vdsbi.estimation.screened_sample`), what `predict --band` uses.
     """
 
     posterior: Any

@@ -42,6 +42,15 @@ def number(value, flag: str, field: str) -> float:
     return float(value)
 
 
+def number_text(text: str, flag: str, field: str) -> float:
+    """`text` (a command-line word such as ``0.1015`` or ``-2e-3``) as a finite float."""
+    try:
+        value = float(text.strip())
+    except ValueError:
+        raise InputError(flag, field, f"must be a finite number, got {text!r}") from None
+    return number(value, flag, field)
+
+
 def theta(text: str | None, defaults: Mapping[str, float], flag: str = "--theta") -> dict[str, float]:
     """{name: value} for every parameter: `defaults` overridden by the JSON object `text`."""
     values = dict(defaults)

@@ -89,6 +89,10 @@ def run(args) -> int:
             a = rep["fit"]["after"][ch]
             print(f"  {ch:12s} held-out χ²/dof {b['chi2_dof']:8.3f} -> {a['chi2_dof']:8.3f}")
         print(f"wrote {args.out}/report.json, report.md, report.html")
-        print("next, the posterior with what was named modelled:")
-    print(rep["identify_command"])
+        if rep["identify_command"]:
+            print("next, the posterior with what was named modelled:")
+    if rep["identify_command"]:
+        print(rep["identify_command"])
+    elif rep.get("not_claimed"):
+        print(rep["not_claimed"])
     return 0

@@ -170,7 +170,8 @@ def _priors(items: list[str]) -> dict[str, tuple[float, float]] | None:
         lo, sep, hi = rng.partition(":")
         if not name or not sep:
             raise InputError("--prior", item, "expected NAME=LO:HI")
-        out[name.strip()] = (_args.number(lo, "--prior", name), _args.number(hi, "--prior", name))
+        name = name.strip()
+        out[name] = (_args.number_text(lo, "--prior", name), _args.number_text(hi, "--prior", name))
     return out or None
 
 

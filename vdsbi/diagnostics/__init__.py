@@ -33,19 +33,6 @@ from ._identifiability import (
     held_by_box as held_by_box,
     identifiability as identifiability,
 )
-from ._least_squares import (
-    FitResult as FitResult,
-    LeastSquaresResult as LeastSquaresResult,
-    gauss_newton_fit as gauss_newton_fit,
-    laplace_covariance as laplace_covariance,
-    levenberg_marquardt as levenberg_marquardt,
-)
-from ._likelihood import (
-    LikelihoodPosterior as LikelihoodPosterior,
-    NoiseModel as NoiseModel,
-    fit_likelihood as fit_likelihood,
-)
-from ._likelihood_screen import screened_sample as screened_sample
 from ._maneuver import Limits as Limits, Maneuver as Maneuver
 from ._misspecification import (
     Localisation as Localisation,

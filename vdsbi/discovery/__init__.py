@@ -32,7 +32,7 @@ from ._results import (
     Verdict as Verdict,
 )
 from ._search import ForwardSearch as ForwardSearch, Step as Step, forward_search as forward_search
-from ._settings import DiagnoseSettings as DiagnoseSettings, map_fit as map_fit
+from ._settings import DiagnoseSettings as DiagnoseSettings
 from ._terms import (
     discover_terms as discover_terms,
     select_terms as select_terms,

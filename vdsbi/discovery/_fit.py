@@ -1,28 +1,21 @@
-"""Differentiable MAP fit of θ, initial speeds and effect parameters.
+"""Candidate explanations fitted with the one estimator (`vdsbi.estimation.fit_likelihood`).
 
-One *super-model* with every registered effect enabled is compiled once per `Fitter`; a
-candidate explanation is a runtime mask saying which effects are active (inactive effects sit
-exactly at their null values), so fitting any candidate reuses one compiled kernel. The
-effects, their fit bounds and starting values are read from the registry
-(`vdsbi.simulator.EFFECTS`, each effect's `bounds` and `start`) when a `Fitter` is built, so
-an effect added with `register_effect` is searched like a built-in one.
+One *super-model* with every candidate effect enabled is built once per `Fitter`; a candidate
+explanation is which effects are active: the others' parameters sit exactly at their null values,
+where they vanish, so every candidate's fit runs one compiled program (the free coordinates padded
+to one width). The effects, their fit bounds and starting values are read from the registry
+(`vdsbi.simulator.EFFECTS`, each effect's `bounds` and `start`) when a `Fitter` is built, so an
+effect added with `register_effect` is searched like a built-in one.
 
-The readings are the problem's own `vdsbi.problem.WindowedModel` around the super-model
-(fixed-step RK4 in `lax.scan`, so forward-mode differentiable); the fit is
-`vdsbi.diagnostics.levenberg_marquardt` with a forward-mode Jacobian over a fixed-width vector
-of free parameters (the candidate's free entries of z, padded), one compilation for all
-candidates.
-
-Parameters live in an unbounded space z: θ inside the vehicle's prior box and the effect
-parameters inside their effects' `bounds`, each through a `vdsbi.problem.Box`; initial speeds
-v0 = v0_meas + z (m/s). A weak Gaussian N(0, 3²) on z (N(0, 1 m/s) on v0) regularises flat
-directions.
-
-Noise model: additive white Gaussian sensor noise, independent per channel with std σ_c.
+A `DiscoveryFit` is the estimator's posterior seen in the search's layout: the unbounded vector
+z = [z_θ (6), z_v0 (W), z_effects (E)], the residual whitened by the sensor noise (what the
+misspecification test holds against noise), and the per-channel residual and noise model the
+evidence is computed with (`vdsbi.discovery._rank`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 
 import equinox as eqx
@@ -31,17 +24,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..diagnostics import laplace_covariance, levenberg_marquardt
+from ..estimation import ModelError, SensorNoise, fit_likelihood
 from ..problem import Box, Problem, WindowedModel, windowed_model
 from ..simulator import EFFECTS, PARAM_NAMES, AbstractVehicleModel, Solver, Vehicle, make_model, model_class
 from ._candidates import EffectSpace, effect_space
 from ._results import DiscoveryFit
 
-#: Prior std of z (θ and effect parameters) and of the initial speed, m/s.
-Z_PRIOR_STD = 3.0
+#: Prior std of the initial speed of a window the fit did not see, m/s.
 V0_PRIOR_STD = 1.0
-#: Largest step of one z coordinate in one iteration (a sigmoid saturates past |z| ≈ 5).
-MAX_Z_STEP = 2.0
 #: Unit-box coordinates of starting values are clipped to [EDGE, 1 − EDGE] before the logit.
 EDGE = 1e-9
 
@@ -136,16 +126,6 @@ def _linearised(wm, space, z, active, free):
     return readings, jac
 
 
-@eqx.filter_jit
-def _fit_free(space, target, z, active, free, prec, max_iter, tol):
-    """Levenberg–Marquardt over the entries `free` of z (padded with an out-of-range index,
-    whose slots nothing reads: their prior keeps them at 0)."""
-    fn = lambda y: whitened(space, target, z.at[free].set(y, mode="drop"), active)
-    return levenberg_marquardt(
-        fn, _take(z, free), prior_precision=prec, max_steps=max_iter, rtol=tol, max_step=MAX_Z_STEP
-    )
-
-
 class Fitter:
     """Fits candidates on the training part of a problem with one compiled kernel.
 
@@ -188,6 +168,11 @@ class Fitter:
         self.num_residuals = int(train.train.sum()) * len(train.channels)
         e = self.effects
         self._z_eff_start = np.asarray(self.space.effects.to_unbounded(e.start, edge=EDGE))
+        self.box = Box(
+            jnp.concatenate([self.space.theta.low, self.space.effects.low]),
+            jnp.concatenate([self.space.theta.high, self.space.effects.high]),
+            (*PARAM_NAMES, *self.space.effects.names),
+        )
 
     def windowed(self, problem: Problem) -> WindowedModel:
         """The super-model over the windows of `problem`."""
@@ -220,12 +205,6 @@ class Fitter:
         for e in effects:
             idx += self._effect_index(e).tolist()
         return np.asarray(idx, dtype=int)
-
-    def _prior_prec(self) -> np.ndarray:
-        w = self.num_windows
-        prec = np.full(self.num_params, 1.0 / Z_PRIOR_STD**2)
-        prec[6 : 6 + w] = 1.0 / V0_PRIOR_STD**2
-        return prec
 
     def _on(self, problem: Problem | None):
         """(z layout map, windows not fitted) for predictions on `problem`'s windows: each
@@ -295,13 +274,16 @@ class Fitter:
         z0: np.ndarray | None = None,
         *,
         max_iter: int = 30,
-        tol: float = 1e-6,
         fix_theta: bool = False,
+        noise: SensorNoise | ModelError = ModelError(),
     ) -> DiscoveryFit:
-        """MAP fit: `levenberg_marquardt` on ½|r|² + ½ Σ prec·z² over the free parameters.
+        """The estimator's fit (`fit_likelihood`) of θ and the `effects`' parameters on the
+        training part, the other effects at their null values.
 
-        `z0` warm-starts (e.g. from the base fit); entries of newly activated effects are
-        reset to their starting values.
+        `z0` warm-starts (e.g. from the base fit), its start speeds included; entries of newly
+        activated effects are reset to their starting values. `noise`: re-measured after each
+        pass (`ModelError`, as identify fits) or held (`ModelError(passes=0, start=...)`, a
+        search's candidates weighed alike).
         """
         effects = tuple(effects)
         z = self.initial_z() if z0 is None else np.array(z0, dtype=float)
@@ -309,64 +291,82 @@ class Fitter:
             i = self._effect_index(e)
             if z0 is None or not np.isfinite(z[i]).all():
                 z[i] = self._z_eff_start[self.effects.slices[e]]
-        free = self.free_index(effects, fix_theta)
-        k = len(free)
-        if k > self.width:
-            raise ValueError(f"fit: {k} free parameters exceed the kernel width {self.width}")
-        index = _padded(free, self.width, self.num_params)
-        prec = np.ones(self.width)
-        prec[:k] = self._prior_prec()[free]
-        act = jnp.asarray(self.active_mask(effects))
-        sol = _fit_free(
-            self.space,
-            self.target,
-            jnp.asarray(z),
-            act,
-            jnp.asarray(index),
-            jnp.asarray(prec),
-            jnp.asarray(max_iter),
-            jnp.asarray(tol, dtype=z.dtype),
-        )
-        z[free] = np.asarray(sol.z)[:k]
-        r, jac = np.asarray(sol.residual), np.asarray(sol.jacobian)[:, :k]
-        return self._result(effects, z, r, jac, free, prec[:k], int(sol.num_steps), bool(sol.converged))
-
-    def _result(self, effects, z, r, jac, free, prec, iterations, converged) -> DiscoveryFit:
         w = self.num_windows
-        chi2 = float(r @ r)
-        dof = max(1, self.num_residuals - len(free))
-        # Laplace covariance in z; inflated by χ²/dof when > 1 (noise under-stated or model
-        # misspecified: the usual quasi-likelihood correction).
-        cov_z = np.asarray(laplace_covariance(jnp.asarray(jac), jnp.asarray(prec))) * max(1.0, chi2 / dof)
-        sd_z = np.zeros(self.num_params)
-        sd_z[free] = np.sqrt(np.clip(np.diag(cov_z), 0, None))
-        zt, zv, ze = self.space.split(z, w)
+        zt, zv, ze = z[:6], z[6 : 6 + w], z[6 + w :]
+        act = self.active_mask(effects)
+        eff = np.where(act, np.asarray(self.space.effects.from_unbounded(ze)), self.effects.null)
+        start = np.concatenate([np.asarray(self.space.theta.from_unbounded(zt)), eff])
+        names = self.box.names
+        free = ([] if fix_theta else list(PARAM_NAMES)) + [names[6 + i] for i in np.flatnonzero(act)]
+        problem = dataclasses.replace(self.problem, v0=np.asarray(self.problem.v0) + zv)
+        post = fit_likelihood(
+            problem,
+            start,
+            self.box,
+            model=self.model,
+            free=free,
+            noise=noise,
+            max_steps=max_iter,
+            solver=self.solver,
+            width=self.width - w,
+        )
+        return self._result(effects, z, post, act)
+
+    def _result(self, effects, z, post, act) -> DiscoveryFit:
+        """`post` in the search's layout (see the module docstring)."""
+        w, z = self.num_windows, z.copy()
+        idx = np.asarray([post.names.index(n) for n in post.free], dtype=int)
+        n_t = int(np.sum(idx < 6))
+        corrected = post.jacobian.shape[-1] > len(idx)
+        z[idx[:n_t]] = post.z[idx[:n_t]]
+        z[6 + w + idx[n_t:] - 6] = post.z[idx[n_t:]]
+        if corrected:
+            z[6 : 6 + w] += post.v0_offset
+        sigma = np.asarray(self.problem.sigma, float)
+        jac_t, jac_e = post.jacobian[..., :n_t], post.jacobian[..., n_t : len(idx)]
+        jac_v = post.jacobian[..., len(idx) :]
+        free = np.concatenate([idx[:n_t], 6 + np.arange(w if corrected else 0), 6 + w + idx[n_t:] - 6])
+        jac = np.concatenate([jac_t, jac_v, jac_e], axis=-1) / sigma[:, None]
+        # The start speeds' variances from their own information (each moves its own window).
+        std = post.noise.std
+        var_v = 1.0 / (np.sum((jac_v / std[:, None]) ** 2, axis=(1, 2)).diagonal() + V0_PRIOR_STD**-2)
+        cov_te = post.cov_z[np.ix_(idx, idx)]
+        cov = np.zeros((len(free),) * 2)
+        order = np.r_[np.arange(n_t), len(idx) + np.arange(jac_v.shape[-1]), n_t + np.arange(len(idx) - n_t)]
+        inv = np.argsort(order)
+        cov[np.ix_(inv[: len(idx)], inv[: len(idx)])] = cov_te
+        if corrected:
+            cov[inv[len(idx) :], inv[len(idx) :]] = np.atleast_1d(var_v)
+        sd = np.sqrt(np.clip(np.diag(post.cov_z), 0, None))
         theta_box, eff_box = self.space.theta, self.space.effects
-        theta = np.asarray(theta_box.from_unbounded(zt))
-        theta_std = np.asarray(theta_box.dtheta_dz(zt)) * sd_z[:6]
-        eval_ = np.asarray(eff_box.from_unbounded(ze))
-        esd = np.asarray(eff_box.dtheta_dz(ze)) * sd_z[6 + w :]
-        params, stds = {}, {}
+        theta = np.asarray(post.theta[:6])
+        theta_std = np.asarray(theta_box.dtheta_dz(post.z[:6])) * sd[:6]
+        ze = post.z[6:]
+        values, stds = np.asarray(eff_box.from_unbounded(ze)), np.asarray(eff_box.dtheta_dz(ze)) * sd[6:]
+        params, spread = {}, {}
         for e in effects:
             s = self.effects.slices[e]
             names = self.effects.classes[e].param_names
-            params[e] = {n: float(v) for n, v in zip(names, eval_[s])}
-            stds[e] = {n: float(v) for n, v in zip(names, esd[s])}
+            params[e] = {n: float(v) for n, v in zip(names, values[s])}
+            spread[e] = {n: float(v) for n, v in zip(names, stds[s])}
+        r = post.residual / sigma
         return DiscoveryFit(
             effects=tuple(effects),
-            z=z.copy(),
+            z=z,
             theta=theta,
             theta_std=theta_std,
-            v0=np.asarray(self.problem.v0) + zv,
+            v0=np.asarray(self.problem.v0) + z[6 : 6 + w],
             effect_params=params,
-            effect_std=stds,
-            chi2=chi2,
+            effect_std=spread,
+            chi2=float(np.sum(r**2)),
             num_samples=self.num_residuals,
             num_params=len(free),
-            residual=r,
-            jacobian=jac,
+            residual=r.reshape(-1),
+            jacobian=jac.reshape(-1, len(free)),
             free=free,
-            iterations=iterations,
-            converged=converged,
-            cov=cov_z,
+            iterations=int(sum(post.steps)),
+            converged=bool(post.converged),
+            cov=cov,
+            rss=np.sum(post.residual**2, axis=(0, 1)),
+            noise=post.noise,
         )

@@ -1,20 +1,22 @@
 """Ranking candidates by evidence, choosing among them, the verdict on the choice, and telling
 look-alike effects apart (or saying why not).
 
-Evidence: the BIC approximation of the log marginal likelihood relative to "none",
+Evidence is computed under the noise model identify uses (`vdsbi.estimation`): each channel's
+unknown error scale profiled, and its N_c samples counted as N_c/τ_c independent ones (τ_c the
+residual's autocorrelation time, the larger of the two fits'). The log marginal likelihood of a
+candidate relative to another is then, in the BIC approximation,
 
-    score = ½·(χ²_none − χ²_cand) − ½·k·ln N,
+    score = ½·Σ_c (N_c/τ_c)·ln(RSS_other,c / RSS_cand,c) − ½·k·ln N_eff,
 
-with k the number of effect parameters added and N the number of fitted residual entries
-(θ and initial speeds are common to all candidates and cancel): a log Bayes factor against
-"none". The ranking score adds the log prior odds: 0 for "none" and single effects, −3 for
-each effect beyond the first (prior odds e⁻³ ≈ 1:20 against each pair — there are n(n−1)/2 pairs
-but n singles, and a pair must earn its second effect; a triple its third), so a set ranks above
-its subset only if the data favour the extra effect strongly (the forward search's rule).
-Scores > 3 (posterior odds > 20:1 against "none") count as strong. Ranking
-confidence: posterior probabilities, exp(score) normalised over all fitted candidates. When the
-whitened residuals are correlated in time (coloured noise, real data) the χ² differences — and
-with them the odds — are overstated; the report says so.
+with k the effect parameters added and N_eff = Σ_c N_c/τ_c: a log Bayes factor. Under white
+sensor noise (τ = 1, the model right) this is the familiar χ² difference; on a real drive, whose
+residual is model error correlated over tens of samples, a small gain is no longer decisive.
+The ranking score adds the log prior odds: 0 for "none" and single effects, −3 for each effect
+beyond the first (prior odds e⁻³ ≈ 1:20 against each pair — there are n(n−1)/2 pairs but n
+singles, and a pair must earn its second effect; a triple its third), so a set ranks above its
+subset only if the data favour the extra effect strongly (the forward search's rule). Scores > 3
+(posterior odds > 20:1 against "none") count as strong. Ranking confidence: posterior
+probabilities, exp(score) normalised over all fitted candidates.
 """
 
 from __future__ import annotations
@@ -39,9 +41,12 @@ HELD_OUT_CLAIM = 1.1
 
 
 def bic_score(fit: DiscoveryFit, base: DiscoveryFit) -> float:
+    """The log Bayes factor of `fit` against `base` (see the module docstring)."""
     k = fit.num_params - base.num_params
-    n = max(base.num_samples, 2)
-    return 0.5 * (base.chi2 - fit.chi2) - 0.5 * k * np.log(n)
+    tau = np.maximum(fit.noise.tau, base.noise.tau)
+    n_eff = np.asarray(fit.noise.samples, float) / tau
+    gain = np.log(np.maximum(base.rss, 1e-300) / np.maximum(fit.rss, 1e-300))
+    return float(0.5 * np.sum(n_eff * gain) - 0.5 * k * np.log(max(n_eff.sum(), 2.0)))
 
 
 def rank(fits: dict[tuple[str, ...], DiscoveryFit], base: DiscoveryFit) -> list[Ranked]:
@@ -124,8 +129,8 @@ def verdict(
     if held_improved is False:
         return {
             "explained": False,
-            "text": f"mismatch detected; {names} fits the fitted part but not the held-out part: "
-            "it is absorbing physics outside the library, not naming it",
+            "text": f"mismatch detected; {names} fits the fitted part but does not improve the "
+            "held-out part: not claimed (it may stand in for physics outside the library)",
         }
     if p_after < alpha / 10:
         return {

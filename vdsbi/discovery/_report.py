@@ -120,9 +120,11 @@ def build_report(
         "verdict": f.conclusion.text,
         **_parameters(f.base, f.final, f.fitter),
         "noise": {
-            "model": "additive white Gaussian per channel",
+            "model": "sensor noise (the test) and the model's error (the fits and the evidence): "
+            "identify's noise model",
             "sigma": {c: float(x) for c, x in zip(windows.channels, windows.sigma)},
             "source": windows.noise_source,
+            "base_fit": f.base.noise.to_dict(),
         },
         "windows": _window_spans(windows, s.train_fraction),
         "channels": list(windows.channels),
@@ -349,12 +351,17 @@ def _md_footer(rep: dict) -> list[str]:
         f"Noise model: {rep['noise']['model']}; σ = "
         + ", ".join(f"{c} {s:.3g} ({rep['noise']['source'][c]})" for c, s in rep["noise"]["sigma"].items()),
         "",
-        "If σ is estimated (no noise_std in the vehicle file) or the noise is coloured (vibration), "
-        "χ² differences and hence the evidence and ranking odds are overstated.",
+        "The misspecification test holds the base fit's residual against σ; the fits and the evidence "
+        "use identify's noise model: each channel's error scale measured at the fit, its samples "
+        "counted by the residual's autocorrelation time ("
+        + ", ".join(f"{c} {d['autocorrelation_time']:.1f}" for c, d in rep["noise"]["base_fit"].items())
+        + " samples at the base fit).",
     ]
     if rep["recording_warnings"]:
         L += ["", "Recording warnings:"] + [f"- {w}" for w in rep["recording_warnings"]]
     L.append(f"\nTook {rep['seconds']:.0f} s.")
+    if rep.get("not_claimed"):
+        L += ["", "## Found, not claimed", "", rep["not_claimed"]]
     if rep.get("identify_command"):
         L += [
             "",

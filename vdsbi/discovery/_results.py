@@ -27,15 +27,18 @@ class DiscoveryFit:
         v0: (W,) fitted initial speeds of the fitted windows, m/s.
         effect_params: {effect: {param: value}}.
         effect_std: {effect: {param: Laplace std}}.
-        chi2: Σ r² over the fitted samples (whitened residual).
+        chi2: Σ r² over the fitted samples (residual whitened by the sensor noise).
         num_samples: number of fitted residual entries N.
         num_params: number of free parameters K (θ, initial speeds, effect parameters).
-        residual: (N,) whitened residual at the optimum, (W, K_t, C) flattened; masked entries 0.
+        residual: (N,) residual whitened by the sensor noise, (W, K_t, C) flattened; masked entries 0.
         jacobian: (N, K) Jacobian of the residual along the free entries of z.
         free: (K,) indices of the free entries of z.
         iterations: LM iterations used.
         converged: whether the relative cost change fell below tolerance.
-        cov: (K, K) Laplace covariance of the free entries of z (inflated by χ²/dof > 1).
+        cov: (K, K) the estimator's covariance of the free entries of z (model error in its
+            noise model; start speeds from their own information).
+        rss: (C,) Σ residual² per channel over the fitted samples, channel units.
+        noise: the estimator's noise model at the fit (`vdsbi.estimation.NoiseModel`).
     """
 
     effects: tuple[str, ...]
@@ -54,6 +57,8 @@ class DiscoveryFit:
     iterations: int
     converged: bool
     cov: np.ndarray
+    rss: np.ndarray | None = None
+    noise: Any = None
 
     @property
     def chi2_dof(self) -> float:

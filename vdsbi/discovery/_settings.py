@@ -7,18 +7,7 @@ import functools
 import time
 from collections.abc import Callable, Sequence
 
-import numpy as np
-
 from ._candidates import effect_names
-from ._fit import Fitter
-from ._results import DiscoveryFit
-
-FitFn = Callable[[Fitter, tuple, "np.ndarray | None", int], DiscoveryFit]
-
-
-def map_fit(fitter: Fitter, effects: tuple, z0, max_iter: int) -> DiscoveryFit:
-    """MAP fit of θ (and the effects' parameters) with a Laplace covariance."""
-    return fitter.fit(effects, z0, max_iter=max_iter)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -39,9 +28,8 @@ class DiagnoseSettings:
         single_iters, final_iters: LM iteration caps for the search and the final fit.
         search_dt, final_dt: RK4 steps, s, of the candidate search and of the base/final fits
             (the test and the held-out comparison use the final step).
-        fit_fn: `(fitter, effects, z0, max_iter) -> DiscoveryFit`; default `map_fit`.
         workers: threads fitting a search step's candidates side by side (each fit keeps about
-            one core busy; a `fit_fn` must then be safe to call from several threads).
+            one core busy).
         max_terms: most candidate terms (`simulator.TERMS`) used to describe a mismatch the
             chosen effects leave (p after the fix < alpha); 0: no term search.
         quiet: no progress lines.
@@ -61,15 +49,10 @@ class DiagnoseSettings:
     final_iters: int = 20
     search_dt: float = 0.005
     final_dt: float = 0.0025
-    fit_fn: FitFn | None = None
     workers: int = 2
     max_terms: int = 3
     quiet: bool = True
     plots: bool = True
-
-    @property
-    def fit(self) -> FitFn:
-        return self.fit_fn or map_fit
 
     def candidate_names(self) -> tuple[str, ...]:
         """The effects searched, in registry order (read now); ValueError on a name that is not

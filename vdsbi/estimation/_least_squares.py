@@ -194,29 +194,3 @@ def laplace_covariance(
     if prior_precision is not None:
         a = a + jnp.diag(jnp.asarray(prior_precision, a.dtype))
     return jnp.linalg.pinv(a)
-
-
-class FitResult(eqx.Module):
-    """Maximum-likelihood fit in scaled units, with the Laplace (Gauss–Newton) covariance."""
-
-    z: Float[Array, " P"]
-    cov_z: Float[Array, "P P"]
-    cost: Float[Array, ""]
-
-
-def gauss_newton_fit(
-    mean_fn: Callable[[Float[Array, " P"]], Float[Array, "T C"]],
-    x: Float[Array, "T C"],
-    std: Float[Array, "T C"],
-    z0: Float[Array, " P"],
-    num_iters: int = 12,
-    damping: float = 1e-3,
-) -> FitResult:
-    """Maximum-likelihood (flat-prior MAP) fit of x ~ N(mean_fn(z), diag(std²)), one data set.
-
-    `levenberg_marquardt` for at most `num_iters` iterations (no prior, no relative-cost
-    stop), so it vmaps over data sets; the Laplace covariance is (JᵀΣ⁻¹J)⁻¹ at the fit.
-    """
-    fn = lambda z: ((mean_fn(z) - x) / std).reshape(-1)
-    sol = levenberg_marquardt(fn, z0, max_steps=num_iters, rtol=0.0, damping=damping)
-    return FitResult(z=sol.z, cov_z=laplace_covariance(sol.jacobian), cost=sol.cost)

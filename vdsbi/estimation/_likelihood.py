@@ -5,20 +5,18 @@ Coordinates: z = `Box.to_unbounded(θ)`, so every estimate stays inside the prio
 uniform prior on θ is logistic in z; it is approximated by N(0, π²/3) per coordinate (the
 logistic's variance), which keeps a direction the drive does not inform at the prior.
 
-Noise model: on a real drive the residual after the best fit is model error — larger than the
-sensor noise and coloured. Each channel c gets a scale s_c (the RMS residual at the fit: the
-Gaussian likelihood with an unknown variance per channel, profiled; never below `SENSOR_SHARE` of
-the sensor noise σ_c) and an integrated autocorrelation time τ_c of that residual (`vdsbi.problem.
-integrated_autocorrelation_time`), so its N_c samples count as N_c/τ_c independent ones. The
-fit minimises Σ_c Σ_k r_ck²/(s_c²·τ_c) + the prior term, by iterated reweighting (fit, re-estimate
-s and τ, refit), with `levenberg_marquardt`; the Laplace covariance (JᵀJ + prior precision)⁻¹ is
+Noise model (`vdsbi.estimation._noise`): with `ModelError` (the default) each channel c gets a
+scale s_c and an autocorrelation time τ_c of its residual, so its N_c samples count as N_c/τ_c
+independent ones; with `SensorNoise`, the sensor's σ_c, white. The fit minimises
+Σ_c Σ_k r_ck²/(s_c²·τ_c) + the prior term, by iterated reweighting (fit, re-estimate s and τ,
+refit), with `levenberg_marquardt`; the Laplace covariance (JᵀJ + prior precision)⁻¹ is
 taken with the final weights. On a simulated drive with the right model s_c → σ_c and τ_c → the
 filter's own correlation; on a real one the intervals widen by the model error, which is what
 makes them hold. This is a quasi-likelihood (Heagerty & Lumley 2000 for the block view of
 dependent residuals; Ribatet et al. 2012 for curvature-adjusted composite likelihoods).
 
 Start speeds: each torque-driven window's start speed is corrected with θ and marginalised
-(`vdsbi.diagnostics._likelihood_start_speed`).
+(`vdsbi.estimation._start_speed`).
 """
 
 from __future__ import annotations
@@ -32,70 +30,18 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from ..problem import (
-    Box,
-    Problem,
-    integrated_autocorrelation_time,
-    parameter_names,
-    simulate_draws,
-    split_parameters,
-    windowed_model,
-)
-from ..simulator import Solver
+from ..problem import Box, Problem, parameter_names, simulate_draws, windowed_model
+from ..simulator import PARAM_NAMES, AbstractVehicleModel, Solver
 from ._least_squares import laplace_covariance, levenberg_marquardt
-from ._likelihood_start_speed import V0_STD, corrected_windows, own_columns, profiled, residual_and_jacobian
-from ._likelihood_widening import BLOCK_TAUS, consistent_covariance, data_splits, robust_covariance
+from ._noise import ModelError, NoiseModel, SensorNoise, measure_noise
+from ._start_speed import V0_STD, corrected_windows, own_columns, profiled, residual_and_jacobian
+from ._widening import BLOCK_TAUS, consistent_covariance, data_splits, robust_covariance
 
 #: Std of the Gaussian standing in for the uniform prior in each logit coordinate (the logistic
 #: distribution's: a uniform θ is logistic in z).
 PRIOR_Z_STD = float(np.pi / np.sqrt(3.0))
 #: Largest step of one logit coordinate per iteration (a sigmoid saturates past |z| ≈ 5).
 MAX_Z_STEP = 2.0
-#: The residual's scale may fall below the recording's sensor-noise estimate down to this share of
-#: it: that estimate takes the noise as white, and a real IMU's vibration lies mostly above the
-#: problem's filter band, so the filter removes more of it than the estimate assumes; the floor
-#: keeps a fit of few effective samples from claiming less noise than it could have fitted away.
-SENSOR_SHARE = 0.25
-
-
-class NoiseModel(eqx.Module):
-    """Per-channel noise of the compared samples, as the fit found it.
-
-    Attributes:
-        channels: channel names.
-        scale: (C,) RMS residual at the fit (≥ `SENSOR_SHARE` of the sensor noise), channel units.
-        tau: (C,) integrated autocorrelation time of the residual, in compared samples.
-        sensor: (C,) sensor noise std after the problem's filter, channel units.
-        samples: (C,) compared samples fitted per channel.
-    """
-
-    channels: tuple[str, ...] = eqx.field(static=True)
-    scale: np.ndarray
-    tau: np.ndarray
-    sensor: np.ndarray
-    samples: np.ndarray
-
-    @property
-    def std(self) -> np.ndarray:
-        """Per-sample std of the equivalent independent-sample likelihood: s·√τ."""
-        return self.scale * np.sqrt(self.tau)
-
-    @property
-    def model_error_ratio(self) -> np.ndarray:
-        """Residual scale over sensor noise: ≈ 1 when the model explains the drive."""
-        return self.scale / self.sensor
-
-    def to_dict(self) -> dict:
-        return {
-            c: {
-                "residual_rms": float(s),
-                "sensor_std": float(n),
-                "model_error_ratio": float(s / n),
-                "autocorrelation_time": float(t),
-                "effective_samples": float(k / t),
-            }
-            for c, s, t, n, k in zip(self.channels, self.scale, self.tau, self.sensor, self.samples)
-        }
 
 
 class LikelihoodPosterior(eqx.Module):
@@ -122,6 +68,10 @@ class LikelihoodPosterior(eqx.Module):
         curvature: (k, k) Gauss–Newton curvature of the fit's cost in the free coordinates, start
             speeds held at their fit: the quadratic model `screened_sample` holds draws against.
         part: the problem's part that was fitted ("train" or "valid").
+        residual: (W, K, C) prediction minus measurement at the fit, channel units; 0 outside
+            the fitted part.
+        jacobian: (W, K, C, k + W') its derivative by the free coordinates (in `free`'s order),
+            then by each corrected window's start speed (W' = 0 where none is corrected).
     """
 
     box: Box
@@ -137,6 +87,15 @@ class LikelihoodPosterior(eqx.Module):
     v0_offset: np.ndarray | None = None
     curvature: np.ndarray | None = None
     part: str = eqx.field(static=True, default="train")
+    residual: np.ndarray | None = None
+    jacobian: np.ndarray | None = None
+
+    @property
+    def chi2_dof(self) -> float:
+        """Σ (residual/σ_sensor)² over the fitted samples per degree of freedom: the misfit
+        against sensor noise alone (≈ 1 where the model explains the drive)."""
+        n = self.noise.samples.sum() - self.jacobian.shape[-1]  # the free ones and the start speeds
+        return float(np.sum((self.residual / self.noise.sensor) ** 2) / max(1.0, n))
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -191,89 +150,122 @@ def fit_likelihood(
     box: Box,
     *,
     effects: Sequence[str] = (),
+    model: AbstractVehicleModel | None = None,
     free: Sequence[str] | None = None,
     part: str = "train",
-    reweights: int = 2,
+    noise: SensorNoise | ModelError = ModelError(),
     max_steps: int = 40,
-    noise: NoiseModel | None = None,
     solver: Solver = Solver(),
+    width: int | None = None,
 ) -> LikelihoodPosterior:
     """The likelihood posterior of `problem`'s `part` samples.
 
     Args:
         problem: the drive.
-        start: (P,) values in `parameter_names(effects)` order, or (M, P) candidates (the mean
-            and draws of a neural posterior, the prior centre, a previous fit): the fit starts
-            from the one that fits best.
-        box: the prior box over `parameter_names(effects)`.
+        start: (P,) values in the box's order, or (M, P) candidates (the mean and draws of a
+            neural posterior, the prior centre, a previous fit): the fit starts from the one that
+            fits best.
+        box: the prior box over `parameter_names(effects)` (with `model`: over θ and its effects'
+            parameters, in its effects' order).
         effects: enabled effects (their parameters follow θ).
+        model: the model to fit (default: the one with `effects`): e.g. one holding every
+            candidate effect, so that one compiled fit serves every candidate; its parameters
+            not `free` stay exactly at `start` (an effect's null values: it vanishes).
         free: names fitted (default: every parameter the channels depend on); the others stay
             at their start and keep their prior variance.
         part: "train" (the fit that is validated on the held-out part) or "valid" (everything).
-        reweights: noise-model passes after the first fit.
+        noise: `ModelError` (default; re-measured after each fit) or `SensorNoise`.
         max_steps: Levenberg–Marquardt iterations per pass.
-        noise: the first pass's noise model: a previous fit's of the same channels (the refit
-            on all the driving starts from the validation fit's, so that its first pass does not
-            weigh the channels by their spread and leave the basin that fit found); default:
-            each channel's spread.
+        solver: the simulator's solver.
+        width: coordinates fitted, the free ones padded to it (default: as many as are free):
+            fits with fewer free parameters then share one compilation.
     """
-    names = parameter_names(effects)
-    if tuple(box.names) != names:
-        raise ValueError(f"box over {box.names}, parameters {names}")
+    if model is None and tuple(box.names) != parameter_names(effects):
+        raise ValueError(f"box over {box.names}, parameters {parameter_names(effects)}")
     # float64: in float32 the Jacobian of a long drive is too coarse and a step into a spinning
     # window goes unnoticed.
     with jax.enable_x64(True):
-        return _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, solver)
+        wm = windowed_model(problem, effects, solver, model=model)
+        sizes = tuple(len(e.param_names) for e in wm.model.effects)
+        if len(box.names) != len(PARAM_NAMES) + sum(sizes):
+            raise ValueError(f"box over {len(box.names)} parameters, the model has {sum(sizes)} beside θ")
+        return _fit(problem, wm, sizes, start, box, free, part, noise, max_steps, width)
 
 
-def _fit(problem, start, box, effects, free, part, reweights, max_steps, noise, solver):
+def _first_noise(data: Problem, mask, noise: SensorNoise | ModelError) -> tuple[np.ndarray, np.ndarray, int]:
+    """(scale, τ, re-measurements) of the first pass."""
+    sensor = np.asarray(data.sigma, float)
+    if isinstance(noise, SensorNoise):
+        return sensor, np.ones_like(sensor), 0
+    first = noise.start
+    if first is None:
+        return np.maximum(np.std(data.y[mask], axis=0), sensor), np.ones_like(sensor), noise.passes
+    if tuple(first.channels) != tuple(data.channels):
+        raise ValueError(f"noise model of {first.channels}, problem channels {data.channels}")
+    return np.asarray(first.scale, float), np.asarray(first.tau, float), noise.passes
+
+
+def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, width):
     names = box.names
     # Every window, the others masked: the validation fit and the refit on all the driving then
     # share one problem shape, and so one compilation.
-    data = problem
     mask = np.asarray(data.part(part))
     box64 = Box(jnp.asarray(box.low, jnp.float64), jnp.asarray(box.high, jnp.float64), names)
-    wm = windowed_model(data, effects, solver)
     sensor = np.asarray(data.sigma, float)
-    if noise is None:
-        scale = np.maximum(np.std(data.y[mask], axis=0), sensor)
-        tau = np.ones_like(scale)
-    elif tuple(noise.channels) != tuple(data.channels):
-        raise ValueError(f"noise model of {noise.channels}, problem channels {data.channels}")
-    else:
-        scale, tau = np.asarray(noise.scale, float), np.asarray(noise.tau, float)
+    scale, tau, passes = _first_noise(data, mask, noise)
     starts = np.atleast_2d(np.asarray(start, float))
-    start = _best_start(wm, data, mask, starts, effects, scale)
+    start = _best_start(wm, data, mask, starts, sizes, scale)
     z0 = np.asarray(box64.to_unbounded(start, edge=1e-4))
     if free is None:
-        free = _informed(wm, data, box64, z0, effects, batch=len(starts))
+        free = _informed(wm, data, box64, z0, sizes, batch=len(starts))
     free = tuple(n for n in names if n in free)
     idx = np.asarray([names.index(n) for n in free], dtype=int)
-    fit = _fitter(wm, data, mask, box64, effects, jnp.asarray(z0), jnp.asarray(idx), max_steps)
+    k = len(idx)
+    kw = k if width is None else max(int(width), k)
+    # Padding slots index past the end: nothing reads them, their prior holds them at 0.
+    padded = np.concatenate([idx, np.full(kw - k, len(names))]).astype(int)
+    fit = _fitter(wm, data, mask, box64, sizes, z0, start, padded, max_steps)
     n_v = corrected_windows(data)
-    z, steps, converged = jnp.asarray(np.concatenate([z0[idx], np.zeros(n_v)])), [], False
-    for _ in range(reweights + 1):
+    p, steps = jnp.asarray(np.concatenate([z0[idx], np.zeros(kw - k + n_v)])), []
+    sensor_only = isinstance(noise, SensorNoise)
+    for _ in range(passes + 1):
         std = scale * np.sqrt(tau)
-        res = fit(z, jnp.asarray(std))
-        z, converged = res.z, bool(res.converged)
+        res = fit(p, jnp.asarray(std))
+        p, converged = res.z, bool(res.converged)
         steps.append(int(res.num_steps))
         resid = np.asarray(res.residual).reshape(*mask.shape, len(scale)) * std
-        scale = np.maximum(np.sqrt(np.sum(resid**2, axis=(0, 1)) / mask.sum()), SENSOR_SHARE * sensor)
-        tau = integrated_autocorrelation_time(resid, mask)
-    k = len(idx)
-    z, v0_offset = np.asarray(z[:k]), np.asarray(z[k:]) if n_v else np.zeros(len(data.v0))
-    jac = np.asarray(res.jacobian).reshape(*mask.shape, len(scale), k + n_v) * (std / scale)[:, None]
+        if not sensor_only:
+            measured = measure_noise(resid, mask, sensor, data.channels)
+            scale, tau = measured.scale, measured.tau
+    p = np.asarray(p)
+    z, v0_offset = p[:k], p[kw:] if n_v else np.zeros(len(data.v0))
+    raw = np.asarray(res.jacobian).reshape(*mask.shape, len(scale), kw + n_v)
+    raw = np.concatenate([raw[..., :k], raw[..., kw:]], axis=-1)
+    jac = raw * (std / scale)[:, None]
     cov_free, informed, shifts, joint, curvature = _covariances(data, mask, jac, resid / scale, z, tau)
     cov, cov_info = (np.diag(np.full(len(names), PRIOR_Z_STD**2)) for _ in range(2))
     cov[np.ix_(idx, idx)] = cov_free
     cov_info[np.ix_(idx, idx)] = informed
     z_all = z0.copy()
-    z_all[idx] = np.asarray(z)
-    noise = NoiseModel(data.channels, scale, tau, sensor, mask.sum() * np.ones_like(scale))
+    z_all[idx] = z
+    noise_model = NoiseModel(data.channels, scale, tau, sensor, mask.sum() * np.ones_like(scale))
     disagree = {free[i]: v for i, v in shifts.items()}
-    steps = tuple(steps)
     return LikelihoodPosterior(
-        box, z_all, cov, cov_info, free, noise, converged, steps, disagree, joint, v0_offset, curvature, part
+        box,
+        z_all,
+        cov,
+        cov_info,
+        free,
+        noise_model,
+        converged,
+        tuple(steps),
+        disagree,
+        joint,
+        v0_offset,
+        curvature,
+        part,
+        resid,
+        raw * std[:, None],
     )
 
 
@@ -298,17 +290,26 @@ def _covariances(data: Problem, mask, jac, r, z, tau):
     return widened, informed, shifts, joint, curvature
 
 
+def split_values(values, sizes: Sequence[int]) -> tuple:
+    """(…, 6 + Σ sizes) -> (θ (…, 6), one (…, size) array per effect of the model)."""
+    out, i = [], len(PARAM_NAMES)
+    for n in sizes:
+        out.append(values[..., i : i + n])
+        i += n
+    return values[..., : len(PARAM_NAMES)], tuple(out)
+
+
 #: Step, in logit coordinates, of the test for which parameters the channels depend on.
 INFORMED_STEP = 0.1
 
 
-def _informed(wm, data: Problem, box: Box, z0: np.ndarray, effects, batch: int) -> tuple[str, ...]:
+def _informed(wm, data: Problem, box: Box, z0: np.ndarray, sizes, batch: int) -> tuple[str, ...]:
     """Parameters the compared channels depend on at z0 (C_κ without torques: none): those whose
     logit step of `INFORMED_STEP` changes a valid sample. One batch of `batch` (or more) draws, so
     that the program `_best_start` compiled for its candidates serves it."""
     steps = z0 + INFORMED_STEP * np.eye(len(z0))
     draws = np.concatenate([z0[None], steps, np.repeat(z0[None], max(0, batch - len(z0) - 1), 0)])
-    theta, effect_params = split_parameters(jax.vmap(box.from_unbounded)(jnp.asarray(draws)), effects)
+    theta, effect_params = split_values(jax.vmap(box.from_unbounded)(jnp.asarray(draws)), sizes)
     pred, ok = simulate_draws(None, wm, theta, effect_params=effect_params)
     pred, ok = np.asarray(pred)[: len(z0) + 1], np.asarray(ok)[: len(z0) + 1]
     valid = np.asarray(data.valid)[..., None]
@@ -319,33 +320,36 @@ def _informed(wm, data: Problem, box: Box, z0: np.ndarray, effects, batch: int) 
     return tuple(n for n, m in zip(box.names, moved) if m)
 
 
-def _best_start(wm, data: Problem, mask, starts: np.ndarray, effects, scale: np.ndarray) -> np.ndarray:
+def _best_start(wm, data: Problem, mask, starts: np.ndarray, sizes, scale: np.ndarray) -> np.ndarray:
     """The candidate with the least scaled squared misfit (a failed simulation is infinitely bad)."""
     if len(starts) == 1:
         return starts[0]
-    theta, effect_params = split_parameters(jnp.asarray(starts), effects)
+    theta, effect_params = split_values(jnp.asarray(starts), sizes)
     pred, ok = simulate_draws(None, wm, theta, effect_params=effect_params)
     err = np.where(mask[..., None], (np.asarray(pred) - data.y) / scale, 0.0)
     cost = np.where(np.asarray(ok), np.sum(err**2, axis=(1, 2, 3)), np.inf)
     return starts[int(np.argmin(np.nan_to_num(cost, nan=np.inf)))]
 
 
-def _residual(wm, y, mask, box: Box, effects, z0, idx, p, std):
-    """Whitened residual at p = [free logit coordinates, start-speed corrections (W or none)]."""
+def _residual(wm, y, mask, box: Box, sizes, z0, start, idx, p, std):
+    """Whitened residual at p = [free logit coordinates (padded), start-speed corrections (W or
+    none)]; the parameters not free sit exactly at `start`."""
     k = idx.shape[0]
-    theta, effect_params = split_parameters(box.from_unbounded(z0.at[idx].set(p[:k])), effects)
+    z = z0.at[idx].set(p[:k], mode="drop")
+    is_free = jnp.zeros(z0.shape[0], bool).at[idx].set(True, mode="drop")
+    theta, effect_params = split_values(jnp.where(is_free, box.from_unbounded(z), start), sizes)
     pred, _ = wm(theta, effect_params, v0=wm.v0 + p[k:] if p.shape[0] > k else None)
     return jnp.where(mask[..., None], (pred - y) / std, 0.0).ravel()
 
 
 @eqx.filter_jit
-def _lm(wm, y, mask, box: Box, effects, z0, idx, p, std, max_steps):
+def _lm(wm, y, mask, box: Box, sizes, z0, start, idx, p, std, max_steps):
     """One Levenberg–Marquardt fit of the free coordinates and start-speed corrections for given
     per-channel stds; a module-level jit, so every fit of the same shapes (the reweighting passes,
-    the refit) compiles once."""
+    the refit, every candidate of a search) compiles once."""
     k = idx.shape[0]
     prec = jnp.concatenate([jnp.full(k, PRIOR_Z_STD**-2), jnp.full(p.shape[0] - k, V0_STD**-2)])
-    fn = lambda q: _residual(wm, y, mask, box, effects, z0, idx, q, std)
+    fn = lambda q: _residual(wm, y, mask, box, sizes, z0, start, idx, q, std)
     return levenberg_marquardt(
         fn,
         p,
@@ -357,8 +361,9 @@ def _lm(wm, y, mask, box: Box, effects, z0, idx, p, std, max_steps):
     )
 
 
-def _fitter(wm, data: Problem, mask, box: Box, effects, z0, idx, max_steps):
+def _fitter(wm, data: Problem, mask, box: Box, sizes, z0, start, idx, max_steps):
     """The fit of the free coordinates as a function of (start, per-channel stds)."""
     y, m = jnp.asarray(data.y), jnp.asarray(mask)
     steps = jnp.asarray(max_steps)
-    return lambda z_free, std: _lm(wm, y, m, box, tuple(effects), z0, idx, z_free, std, steps)
+    z0, start, idx = jnp.asarray(z0), jnp.asarray(start, jnp.float64), jnp.asarray(idx)
+    return lambda p, std: _lm(wm, y, m, box, tuple(sizes), z0, start, idx, p, std, steps)
