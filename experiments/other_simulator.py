@@ -4,7 +4,8 @@
 
 The other simulator is `linear_baseline`'s single-track model (numpy, nothing of vdsbi's): linear
 tyres, or for a race car magic-formula tyres cornering at up to ~1.4 g (`RACE_CAR`: 250 Hz); a yaw
-inertia that is not m·l_f·l_r, the car responding `lag` s after the logged steer, white sensor
+inertia that is not m·l_f·l_r, the car responding `lag` s after the logged steer (or its road-wheel
+angle following the logged steer through a first-order lag: `write_drive(lag_kind=...)`), white sensor
 noise on a_y, yaw rate, speed and steer, sampled at `rate` Hz (10 to 250), no wheel speeds and
 no torques. Each `CASES` drive (90 s: a smooth random steer, the speed swinging between 12 and
 22 m/s; the race car's steer scaled to its speed for a lateral acceleration near the grip,
@@ -26,6 +27,7 @@ import sys
 import tempfile
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Literal
 
 import numpy as np
 
@@ -107,6 +109,21 @@ def magic_formula_drive(car, cf: float, cr: float, t, vx, delta):
     return r, ay
 
 
+def first_order_lag(t, steer, tau: float):
+    """The road-wheel angle δ with τ·δ̇ = steer − δ, from δ = steer at t[0]: exact for a steer
+    linear between the samples of the (fine, uniform) grid `t`."""
+    from scipy.signal import lfilter
+
+    if tau <= 0.0:
+        return np.asarray(steer, float)
+    h = float(t[1] - t[0])
+    a = np.exp(-h / tau)
+    # δ_{k+1} = a·δ_k + c·u_{k+1} + (1 − a − c)·u_k solves the ODE exactly for u linear in [t_k, t_{k+1}].
+    c = 1.0 - tau / h * (1.0 - a)
+    y, _ = lfilter([c, 1.0 - a - c], [1.0, -a], steer, zi=[(1.0 - c) * steer[0]])
+    return y
+
+
 def write_drive(
     folder: Path,
     rate: float,
@@ -117,27 +134,37 @@ def write_drive(
     seed: int,
     duration: float,
     race: bool = False,
+    lag_kind: Literal["delay", "first_order"] = "delay",
 ) -> dict[str, float]:
     """recording.csv, vehicle.json and reference.json (the truth) of one drive in `folder`; the
-    truth. `race`: magic-formula tyres, the steer scaled to the speed for ~1.4 g."""
+    truth. `race`: magic-formula tyres, the steer scaled to the speed for ~1.4 g. `lag_kind`:
+    the car responds to the steer `lag` s after it is logged ("delay"), or its road-wheel angle
+    follows the logged steer with time constant `lag` ("first_order": τ·δ̇ = δ_logged − δ)."""
     import pandas as pd
 
     t = np.arange(0.0, duration, 1.0 / rate)
     rng = np.random.default_rng(seed)
-    # The car responds to the steer `lag` s after it is logged; integrated finely, then sampled.
+    # Integrated finely, then sampled.
     fine = np.arange(0.0, duration, 0.002 if race else 0.005)
+    delay = lag if lag_kind == "delay" else 0.0
+
+    def acting(steer):
+        if lag_kind == "delay":
+            return steer(fine - delay)
+        return first_order_lag(fine, steer(fine), lag)
+
     if race:
         freq, phase, amp = rng.uniform(0.05, 0.35, 6), rng.uniform(0, 2 * np.pi, 6), rng.uniform(0.4, 1, 6)
         speed = lambda s: 22.0 + 7.0 * np.sin(2 * np.pi * s / 23.0) + 2.0 * np.sin(2 * np.pi * s / 7.1)
         shape = lambda s: np.tanh(1.5 * np.sum(amp * np.sin(2 * np.pi * freq * s[:, None] + phase), axis=1))
         steer = lambda s: 16.5 * (car.a + car.b) * shape(s) / speed(s) ** 2
         vx = speed(t)
-        r, ay = magic_formula_drive(car, cf, cr, fine, speed(fine), steer(fine - lag))
+        r, ay = magic_formula_drive(car, cf, cr, fine, speed(fine), acting(steer))
     else:
         freq, phase, amp = rng.uniform(0.05, 0.5, 8), rng.uniform(0, 2 * np.pi, 8), rng.uniform(0.3, 1.0, 8)
         steer = lambda s: 0.012 * np.sum(amp * np.sin(2 * np.pi * freq * s[:, None] + phase), axis=1)
         vx = 17.0 + 5.0 * np.sin(2 * np.pi * t / 45.0)
-        r, ay = linear_baseline.simulate(car, cf, cr, fine, np.interp(fine, t, vx), steer(fine - lag), 0.0)
+        r, ay = linear_baseline.simulate(car, cf, cr, fine, np.interp(fine, t, vx), acting(steer), 0.0)
     cols = {
         "t": t,
         "steer": steer(t) + rng.normal(0, NOISE["steer"], t.size),
@@ -161,7 +188,7 @@ def write_drive(
         "l_f": car.a,
         "C_alpha_f": cf,
         "C_alpha_r": cr,
-        "signal_delay.delay": lag,
+        ("signal_delay.delay" if lag_kind == "delay" else "steering_lag.tau"): lag,
         "yaw_inertia.dynamic_index": car.iz / (car.mass * car.a * car.b),
     }
     ref = {"l_f": car.a, "I_z": car.iz, "source": "the truth", "truth": truth}
