@@ -118,7 +118,9 @@ def test_pairs_pay_a_prior_penalty_and_ranking_agrees_with_choice():
         # one channel whose evidence is the white-noise χ² difference at τ = 1
         noise = SimpleNamespace(tau=np.array([tau]), samples=np.array([10_000.0]))
         rss = np.array([np.exp(chi2 / 10_000)])
-        return SimpleNamespace(chi2=chi2, rss=rss, noise=noise, num_params=6 + k, num_samples=10_000)
+        return SimpleNamespace(
+            chi2=chi2, rss=rss, noise=noise, num_params=6 + k, num_samples=10_000, effects=()
+        )
 
     base = fit(1000.0, 0)
     half_log_n = 0.5 * np.log(10_000)

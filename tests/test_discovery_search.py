@@ -19,17 +19,19 @@ def _fake_fits(explained: dict[str, float], extra: dict[frozenset, float] | None
     def fit_fn(effects, z0):
         gain = sum(explained.get(e, 0.0) for e in effects)
         gain += sum(v for k, v in extra.items() if k <= set(effects))
-        return _fit(5000.0 - gain, len(effects))
+        return _fit(5000.0 - gain, len(effects), effects=tuple(effects))
 
     return fit_fn, fit_fn((), None)
 
 
-def _fit(chi2: float, k: int, tau: float = 1.0) -> SimpleNamespace:
+def _fit(chi2: float, k: int, tau: float = 1.0, effects: tuple = ()) -> SimpleNamespace:
     """A fit of one channel of N samples whose evidence is the white-noise χ² difference when
     τ = 1 (½·N·ln(RSS ratio) with RSS = exp(χ²/N))."""
     noise = SimpleNamespace(tau=np.array([tau]), samples=np.array([float(N)]))
     rss = np.array([np.exp(chi2 / N)])
-    return SimpleNamespace(chi2=chi2, rss=rss, noise=noise, num_params=6 + k, num_samples=N, z=None)
+    return SimpleNamespace(
+        chi2=chi2, rss=rss, noise=noise, num_params=6 + k, num_samples=N, z=None, effects=effects
+    )
 
 
 def _chi2_for(log_evidence: float) -> float:
@@ -83,3 +85,15 @@ def test_an_effect_that_entered_as_a_stand_in_leaves_once_the_true_ones_are_in()
     assert found.steps[0].added == "g"
     assert found.selected == ("a", "b"), found.steps
     assert any(s.removed == "g" for s in found.steps)
+
+
+def test_the_search_starts_from_the_base_set_and_drops_a_default_that_stood_in():
+    # identify's default "g" explains part of the drive; "a" explains it all, "g" adds nothing beside it
+    explained = {"g": _chi2_for(10.0), "a": _chi2_for(40.0)}
+    fit_fn, _ = _fake_fits(explained, {frozenset({"a", "g"}): -_chi2_for(10.0)})
+    base = fit_fn(("g",), None)
+    found = forward_search(fit_fn, base, ("a", "b"), max_effects=2)
+    assert found.steps[0].current == ("g",) and found.steps[0].added == "a"
+    assert found.steps[0].removed == "g" and found.selected == ("a",)
+    ranked = rank(found.fits, base)
+    assert ranked[0].name == "a+no g" and next(r for r in ranked if r.effects == ("g",)).score == 0.0

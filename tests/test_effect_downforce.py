@@ -7,10 +7,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vdsbi.api._default_effects import default_effects
 from vdsbi.discovery import LOOKALIKE_GROUPS, effect_names, effect_space, single_candidates
 from vdsbi.io import build_recording
-from vdsbi.problem import make_problem, prior_box
+from vdsbi.problem import default_effects, make_problem, prior_box
 from vdsbi.simulator import (
     EFFECTS,
     GRAVITY,

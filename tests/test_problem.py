@@ -222,7 +222,7 @@ def test_window_starts_move_to_quiet_moments():
 def test_a_steer_zero_off_the_straight_ahead_shows_as_yaw_at_zero_steer(x64):
     """A log whose steer reads 2 mrad less than the wheels act: the car yaws at a logged zero
     as it does steered steadily by 2 mrad; the honest log of the same drive shows nothing."""
-    from vdsbi.api._default_effects import default_effects
+    from vdsbi.problem import default_effects
 
     dt, offset = 0.005, 0.002
     t = np.arange(0.0, 40.0, dt)

@@ -30,15 +30,24 @@ def identify_command(
     effects: Sequence[str],
     longitudinal: str = "auto",
     priors: Mapping[str, tuple[float, float]] | None = None,
+    *,
+    base: Sequence[str] = (),
+    dropped: Sequence[str] = (),
 ) -> str:
     """`vdsbi identify REC --vehicle V --out identify-NAMES --effects +NAMES [--prior NAME=LO:HI …]`
     adding the effects a diagnosis named to identify's defaults, with the ranges it measured for
-    their parameters (the folder beside the diagnosis' `out`)."""
-    name = "identify-" + ("-".join(effects) or "base")
+    their parameters (the folder beside the diagnosis' `out`). Where the diagnosis also dropped
+    some of identify's defaults (`base`), `--effects` lists the whole set instead."""
+    changes = [*effects, *(f"no-{e}" for e in dropped)]
+    name = "identify-" + ("-".join(changes) or "base")
     target = name if out is None else str(Path(out).parent / name)
+    if dropped:
+        chosen = ",".join([*(e for e in base if e not in dropped), *effects]) or "none"
+    else:
+        chosen = "+" + ",".join(effects) if effects else "none"
     cmd = (
         f"vdsbi identify {shown(recording, 'REC')} --vehicle {shown(vehicle, 'VEHICLE')} "
-        f"--out {shlex.quote(target)} --effects {'+' + ','.join(effects) if effects else 'none'}"
+        f"--out {shlex.quote(target)} --effects {chosen}"
     )
     cmd += "".join(f" --prior {n}={lo:.4g}:{hi:.4g}" for n, (lo, hi) in (priors or {}).items())
     return cmd + ("" if longitudinal == "auto" else f" --longitudinal {longitudinal}")

@@ -178,7 +178,7 @@ def demo(
             for line in lines:
                 say(line)
             diagnosis = _diagnosis(report)
-            if report["chosen"]:
+            if report["identify_command"]:
                 say(f"4/5 identify again, as diagnose says: {report['identify_command']}")
                 folder = "identify-" + "-".join(report["chosen"])
                 refined = run(rec, veh, d, name, folder, report["chosen"], priors=_measured(report))

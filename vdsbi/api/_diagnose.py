@@ -53,11 +53,17 @@ def diagnose(
     chosen = found.report["chosen"]
     rep = found.report
     priors = measured_priors(chosen, rep.get("effect_params", {}), rep.get("effect_params_std", {}))
-    if chosen and not found.verdict.held_out_improved:
+    dropped = rep.get("dropped", [])
+    if not (chosen or dropped):
+        # Nothing to add to identify's model: no command is the fix.
+        extra = {"identify_command": None}
+    elif not found.verdict.held_out_improved:
         # Modelling it does not predict the held-out part better: no command to run as the fix.
         extra = {"identify_command": None, "not_claimed": not_claimed(chosen, priors, found.verdict.text)}
     else:
-        command = identify_command(rec, veh, out, chosen, options.get("longitudinal", "auto"), priors)
+        longitudinal = options.get("longitudinal", "auto")
+        base = rep.get("base_effects", [])
+        command = identify_command(rec, veh, out, chosen, longitudinal, priors, base=base, dropped=dropped)
         extra = {"identify_command": command}
     found = dataclasses.replace(found, report={**found.report, **extra})
     if out_dir is not None:

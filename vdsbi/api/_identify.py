@@ -23,6 +23,7 @@ from ..problem import (
     Problem,
     ProblemSettings,
     concat_problems,
+    default_effects,
     grip_used,
     longitudinal_mode,
     make_problem,
@@ -31,7 +32,6 @@ from ..problem import (
     prior_box,
 )
 from ..simulator import SpeedDriven, model_class, release_compiled_programs
-from ._default_effects import default_effects
 from ._extrapolation import held_out_extrapolation
 from ._identify_report import npe_check, ppc_summary, run_summary, run_warnings, validation_report
 from ._identify_result import IdentifyResult

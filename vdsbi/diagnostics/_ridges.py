@@ -21,13 +21,13 @@ from collections.abc import Sequence
 import numpy as np
 from jaxtyping import Float
 
+from ..estimation import PRIOR_Z_STD
+
 #: |ρ| at or above which two parameters move along one ridge.
 RIDGE_CORRELATION = 0.9
 #: Each member's std over its prior std at or above which the ridge is long enough to leave it
 #: undetermined alone.
 RIDGE_MIN_RATIO = 0.2
-#: A uniform prior's std in the box's logit coordinates (the logistic distribution's).
-UNIFORM_LOGIT_STD = float(np.pi / np.sqrt(3.0))
 WHAT = (
     "the two move together along this step (each by its std) with the fit barely changed: the drive "
     "determines their combination, not each alone"
@@ -38,7 +38,7 @@ def trading_pairs(
     cov: Float[np.ndarray, "P P"],
     names: Sequence[str],
     step: Float[np.ndarray, " P"],
-    prior_std: float | Float[np.ndarray, " P"] = UNIFORM_LOGIT_STD,
+    prior_std: float | Float[np.ndarray, " P"] = PRIOR_Z_STD,
 ) -> list[dict]:
     """The pairs of parameters that trade along a ridge of the posterior, most correlated first.
 

@@ -23,14 +23,15 @@ import numpy as np
 from ..diagnostics import Localisation, MisspecificationTest, locate_mismatch, misspecification_test
 from ..estimation import ModelError
 from ..io import Recording, read_recording, read_vehicle
-from ..problem import Box, Problem, ProblemSettings, longitudinal_mode, make_problem
-from ..simulator import PARAM_NAMES, SpeedDriven, Vehicle, in_background, model_class
-from ._candidates import effect_space, label
+from ..problem import Box, Problem, ProblemSettings, default_effects, longitudinal_mode, make_problem
+from ..simulator import EFFECTS, PARAM_NAMES, SpeedDriven, Vehicle, in_background, model_class
+from ._candidates import effect_names, effect_space, label
 from ._data import compared_inputs, held_out_scores
 from ._fit import Fitter
 from ._rank import (
     STRONG,
     bic_score,
+    changes,
     choose,
     claim_limit,
     merge,
@@ -121,25 +122,39 @@ def _cut_windows(recording: Recording, vehicle: Vehicle, s: DiagnoseSettings, sa
     return problem
 
 
-def _fitters(windows: Problem, s: DiagnoseSettings) -> tuple[Fitter, Fitter]:
+def _base_effects(windows: Problem, s: DiagnoseSettings) -> tuple[str, ...]:
+    """What the search starts from: the effects identify adds by default on this drive
+    (`default_effects`), or the settings' `base_effects`; in the registry's order."""
+    names = [n for n, _ in default_effects(windows)] if s.base_effects is None else list(s.base_effects)
+    unknown = [n for n in names if n not in EFFECTS]
+    if unknown:
+        raise ValueError(f"base_effects: unknown effect(s) {unknown}")
+    return tuple(n for n in EFFECTS if n in names)
+
+
+def _fitters(windows: Problem, s: DiagnoseSettings, base: tuple[str, ...]) -> tuple[Fitter, Fitter]:
     """The search's fitter (coarse step) and the base/final fits' (fine step), on the
-    training part, over the same effects (the registry now)."""
-    effects = effect_space()
+    training part, over the same effects (the registry's searched ones now, and the base set)."""
+    effects = effect_space(tuple(n for n in EFFECTS if n in {*effect_names(), *base}))
     coarse = Fitter(windows, dt=s.search_dt, effects=effects)
     return coarse, Fitter(windows, dt=s.final_dt, effects=effects)
 
 
-def _fit_base(coarse: Fitter, fitter: Fitter, vehicle: Vehicle, s: DiagnoseSettings, say):
-    """The base model from two starts (middle of the prior box, and a typical passenger car),
-    searched with the coarse step, then polished with the fine one."""
+def _fit_base(coarse: Fitter, fitter: Fitter, vehicle: Vehicle, effects, s: DiagnoseSettings, say):
+    """The base model (θ and identify's default `effects`) from two starts (middle of the prior
+    box, and a typical passenger car), searched with the coarse step, then polished with the fine
+    one."""
     # The fine step's programs compile on the other core while the coarse fits run; the polish
     # waits for them rather than compile them a second time.
-    compiling = in_background(fitter.fit, (), max_iter=1, noise=ModelError(passes=0))
+    compiling = in_background(fitter.fit, effects, max_iter=1, noise=ModelError(passes=0))
     starts = [None, coarse.initial_z(typical_theta(vehicle))]
-    base_c = min((coarse.fit((), z, max_iter=s.final_iters) for z in starts), key=lambda f: f.chi2)
+    base_c = min((coarse.fit(effects, z, max_iter=s.final_iters) for z in starts), key=lambda f: f.chi2)
     compiling.result()  # compiled (or raised) before the polish calls it: never compiled twice
-    base = fitter.fit((), base_c.z, max_iter=max(4, s.final_iters // 2))
-    say(f"base fit: χ²/dof {base.chi2_dof:.3f} ({base.iterations} it, {say.seconds:.0f} s)")
+    base = fitter.fit(effects, base_c.z, max_iter=max(4, s.final_iters // 2))
+    say(
+        f"base fit ({label(effects) if effects else 'θ alone'}): χ²/dof {base.chi2_dof:.3f} "
+        f"({base.iterations} it, {say.seconds:.0f} s)"
+    )
     return base_c, base
 
 
@@ -181,40 +196,38 @@ def _search(
     fit_fn = lambda cand, z0: coarse.fit(cand, z0, max_iter=s.single_iters, noise=held)
     found = forward_search(fit_fn, base_c, names, s.max_effects, s.workers)
     ranked = rank(found.fits, base_c)
-    singles = [r for r in ranked if len(r.effects) == 1]
+    singles = [r for r in ranked if changes(r.effects, base_c.effects) == 1]
     say("singles: " + ", ".join(f"{r.name} {r.score:.1f}" for r in singles[:5]))
     for st in found.steps[1:]:
         also = f" (as strong: {', '.join(st.ambiguous_with)})" if st.ambiguous_with else ""
         say(f"add to {label(st.current)}: {st.added or 'nothing'}{also}")
-    multi = [e for e in found.fits if len(e) > 1]
+    multi = [e for e in found.fits if changes(e, base_c.effects) > 1]
     return _Search(found.fits, ranked, multi, found.steps)
 
 
 def _decide(search: _Search, fitter: Fitter, base: DiscoveryFit, detected: bool, s: DiagnoseSettings, say):
     """The chosen explanation and its fit at the fine step."""
-    ranked = search.ranked
-    polished: dict[tuple, DiscoveryFit] = {(): base}
-    if detected and len(ranked[0].effects) >= 2 and ranked[0].score >= STRONG:
-        # Several effects win the search: the search caps iterations and a set starts where
+    ranked, start = search.ranked, tuple(base.effects)
+    polished: dict[tuple, DiscoveryFit] = {start: base}
+    if detected and changes(ranked[0].effects, start) >= 2 and ranked[0].score >= STRONG:
+        # Several changes win the search: the search caps iterations and a set starts where
         # its subset stopped, so polish the set and its fitted subsets one smaller at the fine
         # step with the same budget before deciding between them.
         top = ranked[0].effects
-        subsets = [tuple(e for e in top if e != x) for x in top]
+        subsets = [tuple(e for e in top if e != x) for x in top if x not in start]
         for cand in [top, *(c for c in subsets if c in search.fits)]:
             polished[cand] = fitter.fit(cand, search.fits[cand].z, max_iter=s.final_iters)
         decision = rank(polished, base)
-        chosen = choose(decision, detected)
+        chosen = choose(decision, detected, start)
         say("set check: " + ", ".join(f"{r.name} {r.score:.1f}" for r in decision))
         # report the polished evidence for these, so the ranking and choice agree
-        ranked = merge(ranked, decision)
+        ranked = merge(ranked, decision, start)
     else:
-        chosen = choose(ranked, detected)
+        chosen = choose(ranked, detected, start)
     if chosen in polished:
         final = polished[chosen]
-    elif chosen:
-        final = fitter.fit(chosen, search.fits[chosen].z, max_iter=s.final_iters)
     else:
-        final = base
+        final = fitter.fit(chosen, search.fits[chosen].z, max_iter=s.final_iters)
     say(f"chosen: {label(chosen)} ({say.seconds:.0f} s)")
     return _Decision(ranked, chosen, final)
 
@@ -229,14 +242,15 @@ def _describe_remainder(fitter: Fitter, base, decision, after, held_ok, s, say):
         fit, fitter, chosen, max_terms=s.max_terms, max_iter=s.final_iters
     )
     found = terms(decision.final, decision.chosen)
-    if decision.chosen:
+    if decision.chosen != tuple(base.effects):
         # The chosen effects may stand in for what a term describes better: the terms on the
         # base model alone, kept if their evidence beats the library fit (with its terms).
-        alone = terms(base, ())
+        alone = terms(base, base.effects)
         rival = found.fit if found.fit is not None else decision.final
         if alone.fit is not None and bic_score(alone.fit, rival) > 0:
             gain = float(bic_score(alone.fit, decision.final))
-            found = dataclasses.replace(alone, gain=gain, dropped=list(decision.chosen))
+            named = [e for e in decision.chosen if e not in base.effects]
+            found = dataclasses.replace(alone, gain=gain, dropped=named)
     for t in found.terms:
         say(f"discovered term: {t['formula']}")
     if found.fit is None:
@@ -245,17 +259,21 @@ def _describe_remainder(fitter: Fitter, base, decision, after, held_ok, s, say):
     return found, _check(found.fit, fitter.problem, s.seed + 2, s).test
 
 
-def _conclude(before, decision, after, held, terms, test_terms, windows: Problem, s):
+def _conclude(before, decision, base, after, held, terms, test_terms, windows: Problem, s):
     """The verdict, the report's section on the discovered terms (`terms_section`), and the
-    held-out scores the report shows (those with the terms only where the section uses them)."""
-    chosen, p_before, p_after = decision.chosen, float(before.test.p_value), float(after.test.p_value)
+    held-out scores the report shows (those with the terms only where the section uses them).
+    The verdict names the changes to the base set: the effects added, then any removed."""
+    p_before, p_after = float(before.test.p_value), float(after.test.p_value)
+    named = tuple(e for e in decision.chosen if e not in base.effects)
+    dropped = tuple(e for e in base.effects if e not in decision.chosen)
+    changed = named + tuple(f"no {e}" for e in dropped)
     detected = p_before < s.alpha
-    improved = held_out_improves(held["before"], held["after"]) if chosen else None
-    concl = verdict(detected, chosen, p_after, s.alpha, improved, worst_channel(held["after"]))
+    improved = held_out_improves(held["before"], held["after"]) if changed else None
+    concl = verdict(detected, changed, p_after, s.alpha, improved, worst_channel(held["after"]))
     section = terms_section(
         p_before=p_before,
         p_after=p_after,
-        chosen=decision.final.effects,
+        chosen=changed,
         terms=terms,
         p_terms=None if test_terms is None else float(test_terms.p_value),
         held_after=held["after"],
@@ -264,7 +282,7 @@ def _conclude(before, decision, after, held, terms, test_terms, windows: Problem
         alpha=s.alpha,
     )
     text = concl["text"] + (f"; {section['sentence']}" if section.get("sentence") else "")
-    found = Verdict(detected, chosen, concl["explained"], improved, section["explanation"], text)
+    found = Verdict(detected, named, concl["explained"], improved, section["explanation"], text, dropped)
     if section.pop("fit", None) is None:
         held = {k: v for k, v in held.items() if k != "after_terms"}
     return found, section, held
@@ -345,10 +363,11 @@ def diagnose_mismatch(
 
 def _find(windows: Problem, vehicle: Vehicle, s: DiagnoseSettings, names: tuple[str, ...], say) -> Findings:
     """Every stage after cutting the windows, up to the verdict."""
-    coarse, fitter = _fitters(windows, s)
+    start = _base_effects(windows, s)
+    coarse, fitter = _fitters(windows, s, start)
     fitted = fitter.problem
-    base_c, base = _fit_base(coarse, fitter, vehicle, s, say)
-    in_background(fitter.predict, base.z, (), windows)  # the held-out comparison's, during the search
+    base_c, base = _fit_base(coarse, fitter, vehicle, start, s, say)
+    in_background(fitter.predict, base.z, start, windows)  # the held-out comparison's, during the search
     before = _check(base, fitted, s.seed, s)
     loc, detected = _locate(before, fitted, s, say)
     search = _search(coarse, base_c, names, s, say)
@@ -362,7 +381,7 @@ def _find(windows: Problem, vehicle: Vehicle, s: DiagnoseSettings, names: tuple[
         extra = _held_out(terms.fitter, windows, {"after_terms": terms.fit})
         for into, part in zip((predictions, variances, held), extra):
             into.update(part)
-    conclusion, section, shown = _conclude(before, decision, after, held, terms, test_terms, windows, s)
+    conclusion, section, shown = _conclude(before, decision, base, after, held, terms, test_terms, windows, s)
     return Findings(
         base=base,
         final=decision.final,

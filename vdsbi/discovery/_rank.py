@@ -49,27 +49,49 @@ def bic_score(fit: DiscoveryFit, base: DiscoveryFit) -> float:
     return float(0.5 * np.sum(n_eff * gain) - 0.5 * k * np.log(max(n_eff.sum(), 2.0)))
 
 
+def changes(effects, base_effects) -> int:
+    """Effects added to or removed from the base set."""
+    return len(set(effects) ^ set(base_effects))
+
+
+def change_label(effects, base_effects) -> str:
+    """A candidate named by its changes to the base set: "a+b", "a+no c", or "none"."""
+    added = [e for e in effects if e not in base_effects]
+    return label([*added, *(f"no {e}" for e in base_effects if e not in effects)])
+
+
 def rank(fits: dict[tuple[str, ...], DiscoveryFit], base: DiscoveryFit) -> list[Ranked]:
     """Candidates sorted by score (log posterior odds vs "none"; best first), with posterior
     probabilities."""
     rows = []
     for effects, fit in fits.items():
-        bf = 0.0 if not effects else bic_score(fit, base)
-        rows.append((effects, fit, bf, bf + PAIR_LOG_PRIOR * max(0, len(effects) - 1)))
+        bf = 0.0 if effects == tuple(base.effects) else bic_score(fit, base)
+        rows.append((effects, fit, bf, bf + PAIR_LOG_PRIOR * max(0, changes(effects, base.effects) - 1)))
     scores = np.array([s for *_, s in rows])
     p = np.exp(scores - scores.max())
     p /= p.sum()
     out = [
-        Ranked(label(e), tuple(e), float(s), float(bf), float(pi), f.chi2, f.num_params - base.num_params, f)
+        Ranked(
+            change_label(e, base.effects),
+            tuple(e),
+            float(s),
+            float(bf),
+            float(pi),
+            f.chi2,
+            f.num_params - base.num_params,
+            f,
+        )
         for (e, f, bf, s), pi in zip(rows, p)
     ]
     return sorted(out, key=lambda r: -r.score)
 
 
-def merge(ranked: Sequence[Ranked], better: Sequence[Ranked]) -> list[Ranked]:
+def merge(
+    ranked: Sequence[Ranked], better: Sequence[Ranked], base_effects: Sequence[str] = ()
+) -> list[Ranked]:
     """`ranked` with the rows of the same candidates replaced by `better` ones (e.g. re-fitted
     at a finer step, each scored against its own "none"), re-sorted, probabilities renormalised."""
-    by = {r.effects: r for r in better if r.effects}
+    by = {r.effects: r for r in better if r.effects != tuple(base_effects)}
     rows = [by.get(r.effects, r) for r in ranked]
     scores = np.array([r.score for r in rows])
     p = np.exp(scores - scores.max())
@@ -78,12 +100,12 @@ def merge(ranked: Sequence[Ranked], better: Sequence[Ranked]) -> list[Ranked]:
     return sorted(rows, key=lambda r: -r.score)
 
 
-def choose(ranked: Sequence[Ranked], detected: bool) -> tuple[str, ...]:
+def choose(ranked: Sequence[Ranked], detected: bool, base_effects: Sequence[str] = ()) -> tuple[str, ...]:
     """The chosen explanation: the top candidate if the mismatch was detected and its posterior
-    odds against "none" are strong (a pair's include its prior penalty, so it is chosen only if
-    it beats the best single by log-evidence ≥ 3: parsimony)."""
+    odds against the base set are strong (a pair's include its prior penalty, so it is chosen only
+    if it beats the best single by log-evidence ≥ 3: parsimony); else the base set."""
     if not detected or not ranked or ranked[0].score < STRONG:
-        return ()
+        return tuple(base_effects)
     return ranked[0].effects
 
 
@@ -174,7 +196,11 @@ def separability(ranked: Sequence[Ranked], base: DiscoveryFit) -> list[dict]:
     cornering-stiffness change: the share of its signature inside the span of the C_alpha_f,
     C_alpha_r Jacobian columns of the base fit.
     """
-    singles = {r.effects[0]: r for r in ranked if len(r.effects) == 1}
+    singles = {
+        r.name: r
+        for r in ranked
+        if changes(r.effects, base.effects) == 1 and set(base.effects) <= set(r.effects)
+    }
     out = []
     for group in LOOKALIKE_GROUPS:
         members = [g for g in group if g in singles]

@@ -105,6 +105,8 @@ def build_report(
         "located": _located(f.localisation, f.test_before, windows),
         "effects": _effect_rows(f.ranked),
         "chosen": list(chosen),
+        "base_effects": list(f.base.effects),
+        "dropped": list(f.conclusion.dropped),
         "ranking_confidence": _confidence(f.ranked),
         "separability": f.separability,
         "pairs_fitted": [label(p) for p in f.search.pairs],

@@ -109,11 +109,12 @@ class Verdict:
 
     Attributes:
         detected: the base model's residual test rejected it.
-        chosen: the effects chosen as the explanation (empty: none).
+        chosen: the effects chosen as the explanation, beyond the base set (empty: none).
         explained: whether they account for the whole mismatch (None: nothing detected).
         held_out_improved: whether they also improve the held-out fit (None: none chosen).
         explanation: "library", "discovered term", "unexplained" or "none".
         text: the one-line conclusion.
+        dropped: effects of the base set (identify's defaults) the chosen set leaves out.
     """
 
     detected: bool
@@ -122,6 +123,7 @@ class Verdict:
     held_out_improved: bool | None
     explanation: str
     text: str
+    dropped: tuple[str, ...] = ()
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

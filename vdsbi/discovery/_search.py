@@ -23,7 +23,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
-from ..simulator import release_compiled_programs, thread_map
+from ..simulator import EFFECTS, release_compiled_programs, thread_map
 from ._candidates import label
 from ._rank import STRONG, bic_score
 from ._results import DiscoveryFit
@@ -48,8 +48,9 @@ class ForwardSearch(NamedTuple):
 
 
 def _ordered(effects, names: Sequence[str]) -> tuple[str, ...]:
-    """In the candidates' (registry) order, so a set has one key whatever the path to it."""
-    return tuple(sorted(effects, key=list(names).index))
+    """In the registry's order (then `names`'), so a set has one key whatever the path to it."""
+    order = [*EFFECTS, *(n for n in names if n not in EFFECTS)]
+    return tuple(sorted(effects, key=lambda e: (order.index(e) if e in order else len(order), e)))
 
 
 def _step(current, names, fits, fit_fn, workers: int) -> Step:
@@ -75,25 +76,27 @@ def forward_search(
     max_effects: int = 3,
     workers: int = 1,
 ) -> ForwardSearch:
-    """Forward selection over `names` (see the module docstring).
+    """Forward selection over `names` from the effects of `base` (see the module docstring).
 
     Args:
         fit_fn: `(effects, z0) -> DiscoveryFit`, the fit of a candidate warm-started at z0.
-        base: the base model's fit ("none").
+        base: the base model's fit ("none"), with the effects the search starts from (the
+            backward step may remove them too).
         names: the candidate effects.
-        max_effects: most effects selected (1: singles only).
+        max_effects: most effects added (1: singles only).
         workers: threads fitting a step's candidates side by side (`thread_map`; fit_fn must
             then be safe to call from several threads at once).
 
     Returns:
         `ForwardSearch`: all fits, the steps taken, and the selected effects (possibly none).
     """
-    fits: dict[tuple[str, ...], DiscoveryFit] = {(): base}
+    fits: dict[tuple[str, ...], DiscoveryFit] = {tuple(base.effects): base}
     steps: list[Step] = []
-    current: tuple[str, ...] = ()
+    current: tuple[str, ...] = tuple(base.effects)
+    names = tuple(n for n in names if n not in current)
     # bounded: each step adds one effect and removes at most one
     for _ in range(2 * max(1, max_effects) + 2):
-        if len(current) >= max(1, max_effects):
+        if len(set(current) - set(base.effects)) >= max(1, max_effects):
             break
         step = _step(current, tuple(names), fits, fit_fn, workers)
         if step.added is None:

@@ -19,6 +19,9 @@ class DiagnoseSettings:
         alpha: level of the misspecification test.
         max_effects: most effects the forward search selects (1: singles only).
         candidates: effects to consider (default: every registered effect).
+        base_effects: the effects the search starts from (default: those identify adds by
+            default on the drive, `vdsbi.problem.default_effects`, so that what diagnose names is
+            what identify lacks); () for θ alone.
         longitudinal: "torque", "speed" or "auto" (see `vdsbi.problem.ProblemSettings`).
         max_window, max_windows: windows cut from the usable stretches (s, count; None: 20 s
             with torques, 10 s following the speed, and all of them).
@@ -40,6 +43,7 @@ class DiagnoseSettings:
     alpha: float = 0.05
     max_effects: int = 3
     candidates: Sequence[str] | None = None
+    base_effects: Sequence[str] | None = None
     longitudinal: str = "auto"
     max_window: float | None = None
     max_windows: int | None = None

@@ -2,6 +2,7 @@
 
 from ._box import Box as Box
 from ._concat import concat_problems as concat_problems
+from ._default_effects import default_effects as default_effects
 from ._envelope import (
     ENVELOPE_UNITS as ENVELOPE_UNITS,
     beyond_envelope as beyond_envelope,

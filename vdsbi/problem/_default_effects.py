@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from ..problem import Problem, grip_used, top_speed, yaw_at_zero_steer
 from ..simulator import SpeedDriven
+from ._problem import Problem, grip_used, top_speed, yaw_at_zero_steer
 
 #: A drive is fast where a tenth of it runs above this, m/s: downforce of a typical race car
 #: (0.3–2 × its weight at 50 m/s) adds 7–50 % to the tyres' load here.
