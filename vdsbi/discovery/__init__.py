@@ -9,7 +9,7 @@ from ._candidates import (
     single_candidates as single_candidates,
 )
 from ._data import held_out_scores as held_out_scores
-from ._diagnose import diagnose_mismatch as diagnose_mismatch
+from ._diagnose import diagnose_mismatch as diagnose_mismatch, held_out_improves as held_out_improves
 from ._fit import Fitter as Fitter
 from ._rank import (
     HELD_OUT_CLAIM as HELD_OUT_CLAIM,

@@ -1,0 +1,97 @@
+"""diagnose claims a fix only where it improves the held-out fit: then it prints the identify command
+that models it (the whole effect set where it dropped one of identify's defaults); otherwise it
+prints what it found, with the ranges it measured, and no command."""
+
+from __future__ import annotations
+
+import dataclasses
+import shlex
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+import vdsbi.discovery
+from vdsbi import api
+from vdsbi.cli import build_parser, main
+from vdsbi.discovery import held_out_improves
+
+
+def _held(ay, yaw):
+    return {"ay": {"chi2_dof": ay, "nrmse": 0.1}, "yaw_rate": {"chi2_dof": yaw, "nrmse": 0.1}}
+
+
+def test_held_out_improves_only_if_no_channel_gets_worse():
+    assert held_out_improves(_held(4.0, 3.0), _held(2.0, 3.05))  # within the 2 % slack
+    assert not held_out_improves(_held(4.0, 3.0), _held(1.0, 3.2))  # traded one channel for another
+    assert not held_out_improves(_held(4.0, 3.0), _held(4.0, 3.0))
+
+
+def _fake(improved: bool, chosen=("steering_lag",), dropped=()):
+    report = {
+        "source": "rec.csv",
+        "mismatch_detected": True,
+        "p_value": 0.001,
+        "chosen": list(chosen),
+        "dropped": list(dropped),
+        "base_effects": ["yaw_inertia", "signal_delay"],
+        "effect_params": {"steering_lag": {"tau": 0.2}},
+        "effect_params_std": {"steering_lag": {"tau": 0.01}},
+        "verdict": "the verdict",
+        "fit": {"before": _held(4.0, 3.0), "after": _held(2.0, 2.0)},
+    }
+    verdict = SimpleNamespace(held_out_improved=improved, text="the verdict")
+    return SimpleNamespace(report=report, verdict=verdict)
+
+
+@dataclasses.dataclass
+class _Found:
+    report: dict
+    verdict: object
+
+
+@pytest.mark.parametrize("improved", [True, False])
+def test_the_command_is_printed_only_for_a_fix_that_improves_the_held_out_fit(
+    improved, monkeypatch, capsys, tmp_path
+):
+    fake = _fake(improved)
+    monkeypatch.setattr(
+        vdsbi.discovery, "diagnose_mismatch", lambda *a, **k: _Found(fake.report, fake.verdict)
+    )
+    found = api.diagnose("rec.csv", "vehicle.json", None, names=("rec.csv", "vehicle.json", "diag"))
+    rep = found.report
+    if improved:
+        argv = shlex.split(rep["identify_command"])
+        args = build_parser().parse_args(argv[1:])
+        assert args.effects == "+steering_lag" and "not_claimed" not in rep
+        lo, hi = map(float, args.prior[0].split("=")[1].split(":"))
+        assert lo < 0.2 < hi
+    else:
+        assert rep["identify_command"] is None
+        assert "steering_lag" in rep["not_claimed"] and "steering_lag.tau in [" in rep["not_claimed"]
+        assert "does not improve the held-out fit" in rep["not_claimed"]
+
+
+def test_a_dropped_default_makes_the_command_list_the_whole_set(monkeypatch):
+    fake = _fake(True, dropped=("signal_delay",))
+    monkeypatch.setattr(
+        vdsbi.discovery, "diagnose_mismatch", lambda *a, **k: _Found(fake.report, fake.verdict)
+    )
+    rep = api.diagnose("rec.csv", "vehicle.json", None, names=("rec.csv", "vehicle.json", "diag")).report
+    args = build_parser().parse_args(shlex.split(rep["identify_command"])[1:])
+    assert args.effects == "yaw_inertia,steering_lag"
+    assert args.out.endswith("identify-steering_lag-no-signal_delay")
+
+
+def test_the_cli_prints_what_it_found_and_no_command(monkeypatch, capsys, tmp_path):
+    fake = _fake(False)
+    fake.report |= {"identify_command": None, "not_claimed": "found steering_lag (…), but not claimed"}
+    monkeypatch.setattr(api, "diagnose", lambda *a, **k: fake)
+    rec = tmp_path / "rec.csv"
+    good = Path(__file__).parent / "data" / "good"
+    rec.write_bytes((good / "recording.csv").read_bytes())
+    out = tmp_path / "diag"
+    assert main(["diagnose", str(rec), "--vehicle", str(good / "vehicle.json"), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert printed.strip().splitlines()[-1] == "found steering_lag (…), but not claimed"
+    assert "vdsbi identify" not in printed
