@@ -24,7 +24,8 @@ LAYERS: dict[str, int] = {
     "diagnostics": 5,
     "discovery": 6,
     "api": 7,
-    "cli": 8,
+    "fleet": 8,
+    "cli": 9,
 }
 
 

@@ -18,6 +18,7 @@ COMMANDS: tuple[str, ...] = (
     "._design",
     "._diagnose",
     "._export",
+    "._fleet",
 )
 
 from ..io import output_dir as output_dir  # noqa: E402

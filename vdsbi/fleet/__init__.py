@@ -1,0 +1,32 @@
+"""The fleet: every drive of many cars answered on a Dask cluster, one amortized estimator per
+vehicle platform, each answer checked against the likelihood (Pareto-smoothed importance
+sampling) and escalated to a likelihood fit or the full `identify` when the check fails, and each
+car's parameters followed over time by a sequential test.
+
+    from vdsbi.fleet import fleet
+    result = fleet("manifest.csv", "out/")
+
+Needs the ``fleet`` extra (``pip install 'vdsbi[fleet]'``: Dask.distributed).
+"""
+
+from ._amortized import (
+    AmortizedSettings as AmortizedSettings,
+    PlatformEstimator as PlatformEstimator,
+    Proposal as Proposal,
+    drive_proposal as drive_proposal,
+    train_estimator as train_estimator,
+)
+from ._changes import Change as Change, ChangeSettings as ChangeSettings, detect_changes as detect_changes
+from ._check import CheckResult as CheckResult, importance_check as importance_check
+from ._drive import Escalation as Escalation
+from ._engine import Cluster as Cluster
+from ._fleet import FleetResult as FleetResult, FleetSettings as FleetSettings, fleet as fleet
+from ._manifest import Drive as Drive, read_manifest as read_manifest
+from ._platform import Platform as Platform
+from ._psis import gpd_fit as gpd_fit, psis as psis
+from ._simulated import (
+    TRUE_CHANGES as TRUE_CHANGES,
+    TrueChange as TrueChange,
+    simulated_fleet as simulated_fleet,
+)
+from ._windows import NoiseFamily as NoiseFamily

@@ -1,0 +1,278 @@
+"""One drive answered on a worker: the platform's amortized posterior, checked against the
+likelihood; else a likelihood fit started from it, checked again; else the full `identify`.
+
+Levels (the `method` of estimates.csv):
+
+* ``amortized``: the amortized posterior passed the importance check; the answer is its
+  importance-weighted draws.
+* ``amortized+fit``: the likelihood fit (`vdsbi.estimation.fit_likelihood`) started from the
+  amortized posterior's mean and draws, and its Laplace posterior passed the importance check; the
+  answer is its importance-weighted draws. The neural training per drive, most of `identify`'s
+  time, is what the amortized estimator saves.
+* ``identify``: `vdsbi.api.identify` on the drive, with the platform's effects; its folder stays
+  for `predict` and `export`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import socket
+import time
+import traceback
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from ..estimation import PRIOR_Z_STD, ModelError, fit_likelihood
+from ..io import InputError, write_text_atomically
+from ._amortized import PlatformEstimator, Proposal, drive_proposal
+from ._check import K_MAX, CheckResult, importance_check, weighted_summary
+from ._manifest import Drive
+from ._platform import WINDOW_SECONDS, Platform, drive_problem
+from ._shape import fixed_shape
+from ._windows import drive_x
+
+#: Spread of the t proposal over the amortized posterior (crude: wide) and over the fit's Laplace
+#: posterior (its own curvature: near the target).
+AMORTIZED_SPREAD, FIT_SPREAD = 1.5, 1.2
+#: Draws of the amortized posterior tried as the fit's start, beside its mean.
+STARTS = 7
+
+
+@dataclasses.dataclass(frozen=True)
+class Escalation:
+    """`identify`'s settings for the drives whose check fails (its own defaults: 2 rounds of 1000).
+
+    Attributes:
+        rounds, sims, epochs, ppc_draws: as `vdsbi.api.identify`'s.
+    """
+
+    rounds: int = 2
+    sims: int = 1000
+    epochs: int | None = None
+    ppc_draws: int = 100
+
+
+#: Estimators a worker has loaded, by folder: loaded once per worker, not once per drive.
+_LOADED: dict[str, PlatformEstimator] = {}
+
+
+def _estimator(folder: Path, platform: Platform) -> PlatformEstimator:
+    key = f"{folder}:{platform.ident}"
+    if key not in _LOADED:
+        _LOADED[key] = PlatformEstimator.load(folder, platform)
+    return _LOADED[key]
+
+
+def drive_folder(out: Path, drive: Drive) -> Path:
+    return out / "drives" / drive.key
+
+
+def answer_drive(
+    drive: Drive,
+    prepared: tuple[Platform | None, Path | None, str | None],
+    *,
+    out: Path,
+    seed: int,
+    escalation: Escalation,
+    settings_id: str,
+    draws_per_window: int = 400,
+) -> dict:
+    """Answer `drive` and write its result.json (atomically; the record returned). `prepared` is
+    the platform, its estimator's folder and why there is none. Bad input is a failed record,
+    never an exception: one drive's fault does not stop the fleet."""
+    folder = drive_folder(out, drive)
+    folder.mkdir(parents=True, exist_ok=True)
+    attempt = _mark_running(folder)
+    platform, est_folder, no_estimator = prepared
+    key = jax.random.fold_in(jax.random.key(seed), int(drive.key.rsplit("-", 1)[-1], 16) % (2**31))
+    record = {
+        "car": drive.car,
+        "recording": drive.name,
+        "time": drive.time,
+        "order": drive.order,
+        "line": drive.line,
+        "key": drive.key,
+        "platform": None if platform is None else platform.ident,
+        "settings": settings_id,
+        "attempt": attempt,
+        "worker": {"pid": os.getpid(), "host": socket.gethostname()},
+    }
+    start = time.perf_counter()
+    stages: dict[str, float] = {}
+    try:
+        record |= _answer(
+            key, drive, platform, est_folder, no_estimator, folder, escalation, draws_per_window, stages
+        )
+    except InputError as err:
+        record |= {"method": "failed", "error": str(err)}
+    except Exception as err:  # a bug or an unforeseen recording: recorded, the fleet goes on
+        record |= {
+            "method": "failed",
+            "error": f"{type(err).__name__}: {err}",
+            "traceback": traceback.format_exc(),
+        }
+    record["seconds"] = round(time.perf_counter() - start, 2)
+    record["stages"] = {k: round(v, 2) for k, v in stages.items()}
+    write_text_atomically(folder / "result.json", json.dumps(record, indent=1) + "\n")
+    (folder / "running.json").unlink(missing_ok=True)
+    return record
+
+
+def _mark_running(folder: Path) -> int:
+    """Write running.json (this worker's pid and host, the attempt); return the attempt number (a
+    killed worker's drive is retried: its running.json is still there)."""
+    marker = folder / "running.json"
+    attempt = 1
+    if marker.exists():
+        try:
+            attempt = int(json.loads(marker.read_text()).get("attempt", 0)) + 1
+        except (ValueError, OSError):
+            attempt = 2
+    info = {"pid": os.getpid(), "host": socket.gethostname(), "attempt": attempt, "started": time.time()}
+    write_text_atomically(marker, json.dumps(info) + "\n")
+    return attempt
+
+
+def _timed(stages: dict, name: str, fn, *args, **kwargs):
+    t = time.perf_counter()
+    try:
+        return fn(*args, **kwargs)
+    finally:
+        stages[name] = stages.get(name, 0.0) + time.perf_counter() - t
+
+
+def _answer(
+    key, drive, platform, est_folder, no_estimator, folder, escalation, draws_per_window, stages
+) -> dict:
+    k_prop, k_check, k_start, k_fit_check = jax.random.split(key, 4)
+    why = no_estimator
+    problem = None
+    if why is None:
+        problem = _timed(stages, "problem", drive_problem, drive.recording, drive.vehicle)
+        why = platform.fits(problem)
+    if why is None:
+        try:
+            problem = fixed_shape(problem, WINDOW_SECONDS)
+        except InputError as err:
+            why = err.detail
+    if why is not None:
+        return _identify(drive, platform, folder, escalation, why, stages)
+    box, effects = platform.box, platform.effects
+    estimator = _timed(stages, "load", _estimator, est_folder, platform)
+    x, has = drive_x(problem)
+    proposal = _timed(stages, "amortized", drive_proposal, k_prop, estimator, x, has, draws_per_window)
+    check = _timed(
+        stages, "check", importance_check, k_check, problem, box, effects, proposal, spread=AMORTIZED_SPREAD
+    )
+    checks = {"amortized": _check_record(check)}
+    if check.passed:
+        return _checked("amortized", check, box, checks)
+    starts = _starts(k_start, proposal, box)
+    fit = _timed(
+        stages,
+        "fit",
+        fit_likelihood,
+        problem,
+        starts,
+        box,
+        effects=effects,
+        noise=ModelError(passes=1),
+        width=box.dim,
+    )
+    laplace = _laplace(fit, box)
+    check = _timed(
+        stages,
+        "check",
+        importance_check,
+        k_fit_check,
+        problem,
+        box,
+        effects,
+        laplace,
+        spread=FIT_SPREAD,
+        noise=fit.noise,
+    )
+    checks["fit"] = _check_record(check)
+    if check.passed:
+        return _checked("amortized+fit", check, box, checks)
+    why = f"importance check failed after the fit: k̂ {check.k_hat:.2f} > {K_MAX}"
+    return _identify(drive, platform, folder, escalation, why, stages) | {"checks": checks}
+
+
+def _starts(key, proposal: Proposal, box) -> np.ndarray:
+    """The fit's candidate starts in parameter units: the amortized mean and `STARTS` draws."""
+    chol = np.linalg.cholesky(proposal.cov)
+    eps = np.asarray(jax.random.normal(key, (STARTS, len(proposal.mean))))
+    z = np.concatenate([proposal.mean[None], proposal.mean[None] + eps @ chol.T])
+    return np.asarray(jax.vmap(box.from_unbounded)(z), float)
+
+
+def _laplace(fit, box) -> Proposal:
+    """The fit's Laplace posterior with its own curvature (the quadratic model of the cost the
+    check's likelihood is: the fit's noise model, no widening), the prior's variance for the
+    parameters not fitted."""
+    cov = np.diag(np.full(box.dim, PRIOR_Z_STD**2))
+    idx = [box.names.index(n) for n in fit.free]
+    if idx:
+        cov[np.ix_(idx, idx)] = np.linalg.inv(np.asarray(fit.curvature))
+    return Proposal(np.asarray(fit.z, float), cov, 0)
+
+
+def _check_record(check: CheckResult) -> dict:
+    return {
+        "k_hat": round(check.k_hat, 3) if np.isfinite(check.k_hat) else None,
+        "ess": round(check.ess, 4),
+        "noise_ratio": check.noise_ratio,
+        "failed_share": round(check.failed_share, 4),
+    }
+
+
+def _checked(method: str, check: CheckResult, box, checks: dict) -> dict:
+    return {
+        "method": method,
+        "parameters": weighted_summary(check.theta, check.weights, box, check.informed),
+        "checks": checks,
+        "noise_ratio": check.noise_ratio,
+    }
+
+
+def _identify(drive: Drive, platform, folder: Path, escalation: Escalation, why: str, stages) -> dict:
+    """The full `identify` into the drive's folder (kept for `predict` and `export`)."""
+    from .. import api
+
+    target = folder / "identify"
+    resume = target.exists() and any(target.iterdir())
+    res = _timed(
+        stages,
+        "identify",
+        api.identify,
+        str(drive.recording),
+        str(drive.vehicle),
+        rounds=escalation.rounds,
+        sims=escalation.sims,
+        epochs=escalation.epochs,
+        ppc_draws=escalation.ppc_draws,
+        effects=None if platform is None else list(platform.effects),
+        holdout=0.0,
+        out_dir=target,
+        resume=resume,
+    )
+    params = {}
+    for name, p in res.summary["parameters"].items():
+        params[name] = {
+            "estimate": float(p["estimate"]),
+            "mean": float(p.get("mean", p["q50"])),
+            "std": float(p["std"]),
+            "q05": float(p["q05"]),
+            "q50": float(p["q50"]),
+            "q95": float(p["q95"]),
+            "identified": p.get("identified") is not False,
+        }
+    ratio = {
+        c: round(float(v["model_error_ratio"]), 3) for c, v in res.summary.get("noise_model", {}).items()
+    }
+    return {"method": "identify", "escalated_because": why, "parameters": params, "noise_ratio": ratio}

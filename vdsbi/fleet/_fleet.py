@@ -1,0 +1,200 @@
+"""`fleet`: every drive of a manifest answered on a cluster, the platforms' estimators trained once,
+the results written as drives finish, then the changes per car and the report."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from ..io import InputError, write_text_atomically
+from ._amortized import AmortizedSettings
+from ._changes import ChangeSettings
+from ._drive import Escalation, answer_drive
+from ._engine import Cluster, open_client
+from ._manifest import Drive, read_manifest
+from ._prepare import prepare_platform
+from ._report import write_report
+from ._tables import append_estimates, fleet_changes, read_results, write_changes, write_estimates
+
+
+@dataclasses.dataclass(frozen=True)
+class FleetSettings:
+    """How the fleet is answered.
+
+    Attributes:
+        amortized: the platforms' estimators.
+        escalation: `identify`'s settings for drives whose check fails.
+        changes: the sequential test per car and parameter.
+        seed: the only source of randomness.
+    """
+
+    amortized: AmortizedSettings = AmortizedSettings()
+    escalation: Escalation = Escalation()
+    changes: ChangeSettings = ChangeSettings()
+    seed: int = 0
+
+    @property
+    def ident(self) -> str:
+        """A drive's answer is reused on a re-run only when it was made with the same settings."""
+        return hashlib.sha1(repr((self.amortized, self.escalation, self.seed)).encode()).hexdigest()[:12]
+
+
+@dataclasses.dataclass(frozen=True)
+class FleetResult:
+    """What a fleet run did.
+
+    Attributes:
+        out: the output folder.
+        records: every drive's result (this run's and earlier runs' with the same settings).
+        changes: the detected changes.
+        answered: drives answered in this run.
+        skipped: drives already answered by an earlier run.
+        seconds: wall time of this run.
+    """
+
+    out: Path
+    records: list
+    changes: list
+    answered: int
+    skipped: int
+    seconds: float
+
+    def methods(self) -> dict[str, int]:
+        out: dict[str, int] = {}
+        for r in self.records:
+            out[r["method"]] = out.get(r["method"], 0) + 1
+        return out
+
+
+def fleet(
+    manifest: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    settings: FleetSettings = FleetSettings(),
+    cluster: Cluster = Cluster(),
+    *,
+    retrain: bool = False,
+    log: Callable[[str], None] | None = None,
+) -> FleetResult:
+    """Answer every drive of `manifest` into `out_dir` (see the `vdsbi fleet` command).
+
+    Writes out_dir/estimates.csv (rows appended as drives finish, rebuilt in order at the end),
+    changes.csv, report.html, drives/<drive>/result.json (and identify/ where a drive escalated)
+    and platforms/<vehicle>/ (the platform's record and its estimator). A re-run with the same
+    settings skips the drives already answered; `retrain` trains the estimators again.
+
+    Raises:
+        InputError: a bad manifest (naming its line), or `out_dir` not a folder.
+    """
+    say = log or (lambda s: None)
+    start = time.perf_counter()
+    drives = read_manifest(manifest)
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "--out", "exists and is not a directory")
+    out.mkdir(parents=True, exist_ok=True)
+    sid = settings.ident
+    write_text_atomically(
+        out / "fleet.json", json.dumps(_run_record(manifest, settings, cluster), indent=2) + "\n"
+    )
+    done = {r["key"] for r in read_results(out, sid) if r.get("method") != "failed"}
+    todo = [d for d in drives if d.key not in done]
+    estimates = out / "estimates.csv"
+    write_estimates(estimates, [r for r in read_results(out, sid) if r["key"] in {d.key for d in drives}])
+    say(
+        f"{len(drives)} drives of {len({d.car for d in drives})} cars; "
+        f"{len(drives) - len(todo)} already answered"
+    )
+    answered = 0
+    if todo:
+        answered = _run(todo, drives, out, settings, cluster, retrain, estimates, say)
+    keys = {d.key for d in drives}
+    records = [r for r in read_results(out, sid) if r["key"] in keys]
+    write_estimates(estimates, records)
+    changes = fleet_changes(records, settings.changes)
+    write_changes(out / "changes.csv", changes)
+    seconds = time.perf_counter() - start
+    write_report(out / "report.html", records, changes, seconds)
+    return FleetResult(out, records, changes, answered, len(drives) - len(todo), seconds)
+
+
+def _run(todo, drives, out, settings, cluster, retrain, estimates, say) -> int:
+    """Submit each platform's preparation, then its drives (which wait for it); write each drive's
+    rows as it finishes."""
+    from distributed import as_completed
+
+    by_vehicle: dict[Path, list[Drive]] = {}
+    for d in drives:
+        by_vehicle.setdefault(d.vehicle, []).append(d)
+    with open_client(cluster) as client:
+        say(f"cluster: {len(client.scheduler_info().get('workers', {}))} workers")
+        prepared = {}
+        for vehicle, group in by_vehicle.items():
+            if any(d in todo for d in group):
+                prepared[vehicle] = client.submit(
+                    prepare_platform,
+                    vehicle,
+                    group,
+                    out=out,
+                    settings=settings.amortized,
+                    seed=settings.seed,
+                    retrain=retrain,
+                    key=f"platform-{vehicle.name}-{settings.ident}-{time.time_ns()}",
+                    pure=False,
+                )
+        futures = {
+            client.submit(
+                answer_drive,
+                d,
+                prepared[d.vehicle],
+                out=out,
+                seed=settings.seed,
+                escalation=settings.escalation,
+                settings_id=settings.ident,
+                draws_per_window=settings.amortized.draws_per_window,
+                key=f"drive-{d.key}-{time.time_ns()}",
+                pure=False,
+            ): d
+            for d in todo
+        }
+        n, t0 = 0, time.perf_counter()
+        for future in as_completed(futures):
+            d = futures[future]
+            n += 1
+            try:
+                record = future.result()
+            except Exception as err:  # the drive's workers died ALLOWED_FAILURES times
+                say(
+                    f"[{n}/{len(todo)}] {d.car} {d.name}: not answered ({type(err).__name__}); "
+                    "a re-run retries it"
+                )
+                continue
+            append_estimates(estimates, record)
+            rate = n / (time.perf_counter() - t0) * 3600
+            k = _k_text(record)
+            say(
+                f"[{n}/{len(todo)}] {d.car} {d.name}: {record['method']}{k} in {record['seconds']:.0f} s"
+                f" (attempt {record.get('attempt', 1)}; {rate:.0f} drives/h)"
+                + (f": {record['error']}" if record["method"] == "failed" else "")
+            )
+    return n
+
+
+def _k_text(record: dict) -> str:
+    checks = record.get("checks") or {}
+    last = checks.get("fit") or checks.get("amortized")
+    return "" if not last or last.get("k_hat") is None else f" (k̂ {last['k_hat']:.2f})"
+
+
+def _run_record(manifest, settings: FleetSettings, cluster: Cluster) -> dict:
+    return {
+        "manifest": str(Path(manifest).resolve()),
+        "settings_id": settings.ident,
+        "settings": repr(settings),
+        "address": cluster.address,
+        "workers": cluster.workers,
+    }
