@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from ..inference import AbstractObservation
 
 from ..estimation import ModelError, fit_likelihood, screened_sample
-from ..io import InputError, SimulationError
+from ..io import InputError, SimulationError, steer_response
 from ..problem import (
     Box,
     Problem,
@@ -136,7 +136,8 @@ def identify(
         estimator, npe_samples, state = _train(
             k_id, prob, box, effects, settings, state, out, progress, on_round_end, say
         )
-        checked, fit = _fit_likelihood(prob, full, _starts(npe_samples, box), box, effects, say)
+        starts = _starts(npe_samples, box, _steer_lag(recs[0], veh))
+        checked, fit = _fit_likelihood(prob, full, starts, box, effects, say)
         prob, full = checked.with_fitted_starts(prob), fit.with_fitted_starts(full)
         kw = dict(vehicle=veh, run_info=run_info, box=box, effects=effects, compare=compare)
         kw |= dict(names=names or (recording, vehicle, out_dir), longitudinal=longitudinal)
@@ -380,8 +381,32 @@ def _train(key, prob: Problem, box: Box, effects, settings, state, out, progress
 STARTS = 31
 
 
-def _starts(npe_samples: np.ndarray, box: Box) -> np.ndarray:
+#: The lag parameters a measured steer-to-response lag starts.
+LAG_PARAMETERS = ("signal_delay.delay", "steering_lag.tau")
+
+
+def _steer_lag(rec, vehicle) -> float | None:
+    """The lag, s, at which the yaw rate follows v·steer/L best (what `check` reports), or None."""
+    speed = rec.speed(vehicle.wheel_radius)
+    found = None if speed is None else steer_response(rec, vehicle.wheelbase, speed)
+    return None if found is None else float(found[2])
+
+
+def _starts(npe_samples: np.ndarray, box: Box, lag: float | None = None) -> np.ndarray:
     """Candidate starts of the likelihood fit: the neural posterior's mean and draws (its global
-    view of where the data put θ) and the prior centre."""
+    view of where the data put θ) and the prior centre; with a measured steer-to-response `lag`,
+    also the mean with its lag parameters at that lag and at half of it (the measured one holds
+    the tyres' and the body's own lag too): evidence the fit may use, kept only if it fits best."""
     centre = np.asarray(box.low + 0.5 * box.width)
-    return np.concatenate([npe_samples.mean(0)[None], centre[None], npe_samples[:STARTS]])
+    mean = npe_samples.mean(0)
+    out = [mean[None], centre[None], npe_samples[:STARTS]]
+    lags = [i for i, n in enumerate(box.names) if n in LAG_PARAMETERS]
+    if lag is not None and lag > 0 and lags:
+        lo, hi = np.asarray(box.low), np.asarray(box.high)
+        for share in (0.5, 1.0):
+            start = mean.copy()
+            start[lags] = np.clip(
+                share * lag, lo[lags] + 0.01 * (hi - lo)[lags], hi[lags] - 0.01 * (hi - lo)[lags]
+            )
+            out.append(start[None])
+    return np.concatenate(out)
