@@ -10,8 +10,9 @@ fit's, or measured at the best draw), Σ r²/(s_c²·τ_c). Parameters the
 channels do not depend on (a step of 0.1 in z moves no fitted sample) are drawn from their prior
 afterwards: the likelihood cannot weigh them.
 
-The check passes at k̂ ≤ `K_MAX` (Vehtari et al. 2024: at S of a few hundred draws,
-min(1 − 1/log10 S, 0.7)); the drive's answer is then the importance-weighted draws.
+The check passes at k̂ ≤ min(1 − 1/log10 S, 0.7) for S draws (Vehtari et al. 2024: past it
+the importance-weighted estimates' error no longer falls with S; 0.58 at the ~250 draws here);
+the drive's answer is then the importance-weighted draws.
 """
 
 from __future__ import annotations
@@ -35,8 +36,13 @@ DRAWS = 256
 DOF = 5.0
 #: Logit step of the probes that find the parameters the channels depend on.
 PROBE_STEP = 0.1
-#: k̂ above which the importance-weighted answer is not trusted.
+#: k̂ above which the importance-weighted answer is not trusted, at most 0.7.
 K_MAX = 0.7
+
+
+def k_threshold(draws: int) -> float:
+    """The largest k̂ at which `draws` importance draws are trusted."""
+    return min(1.0 - 1.0 / np.log10(draws), K_MAX)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,7 +69,7 @@ class CheckResult:
 
     @property
     def passed(self) -> bool:
-        return self.k_hat <= K_MAX
+        return self.k_hat <= k_threshold(len(self.weights))
 
 
 def _t_draws(key: PRNGKeyArray, proposal: Proposal, spread: float, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -29,7 +29,7 @@ import numpy as np
 from ..estimation import PRIOR_Z_STD, ModelError, fit_likelihood
 from ..io import InputError, write_text_atomically
 from ._amortized import PlatformEstimator, Proposal, drive_proposal
-from ._check import K_MAX, CheckResult, importance_check, weighted_summary
+from ._check import CheckResult, importance_check, k_threshold, weighted_summary
 from ._manifest import Drive
 from ._platform import WINDOW_SECONDS, Platform, drive_problem
 from ._shape import fixed_shape
@@ -199,7 +199,9 @@ def _answer(
     checks["fit"] = _check_record(check)
     if check.passed:
         return _checked("amortized+fit", check, box, checks)
-    why = f"importance check failed after the fit: k̂ {check.k_hat:.2f} > {K_MAX}"
+    why = (
+        f"importance check failed after the fit: k̂ {check.k_hat:.2f} > {k_threshold(len(check.weights)):.2f}"
+    )
     return _identify(drive, platform, folder, escalation, why, stages) | {"checks": checks}
 
 

@@ -11,9 +11,9 @@ import numpy as np
 from ..io import InputError
 from ..problem import Problem
 
-#: Windows are padded to a multiple of this many (a drive of 1–8 windows and one of 9–16 each
+#: Windows are padded to a multiple of this many (a drive of 1–4 windows and one of 5–8 each
 #: share a program).
-WINDOW_BUCKET = 8
+WINDOW_BUCKET = 4
 
 
 def _hold(a: np.ndarray | None, axis1: int | None, windows: int, fill=None) -> np.ndarray | None:

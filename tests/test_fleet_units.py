@@ -1,0 +1,97 @@
+"""The fleet's pieces on known cases: Pareto-smoothed importance sampling's k̂, the sequential test
+per car and parameter, the manifest's errors."""
+
+import numpy as np
+import pytest
+
+from vdsbi.cli import main
+from vdsbi.fleet import detect_changes, gpd_fit, psis, read_manifest
+
+
+@pytest.mark.parametrize("k", [0.2, 0.5, 0.9])
+def test_gpd_fit_recovers_the_shape_of_pareto_draws(k):
+    rng = np.random.default_rng(0)
+    x = np.sort((rng.uniform(size=20_000) ** -k - 1.0) / k)  # generalized Pareto, σ = 1
+    k_hat, sigma = gpd_fit(x)
+    assert abs(k_hat - k) < 0.03 and abs(sigma - 1.0) < 0.05
+
+
+def test_psis_k_hat_of_a_normal_proposal_follows_the_weights_tail():
+    """Target N(0, 1), proposal N(0, s²): the weights' tail index is 1/(1 − s²), so k = 1 − s²
+    for s < 1 (heavy-tailed weights), and k̂ < 0 for a wider proposal (bounded weights)."""
+    rng = np.random.default_rng(1)
+    found = {}
+    for s in (0.6, 0.9, 1.5):
+        ks = []
+        for _ in range(10):
+            x = rng.normal(0.0, s, 2000)
+            weights, k = psis(-0.5 * x**2 + 0.5 * (x / s) ** 2)
+            assert np.isclose(weights.sum(), 1.0)
+            ks.append(k)
+        found[s] = float(np.mean(ks))
+    assert abs(found[0.6] - (1 - 0.36)) < 0.15
+    assert abs(found[0.9] - (1 - 0.81)) < 0.15
+    assert found[1.5] < 0.0
+    # the smoothed weights' estimate of E[x²] under the target
+    x = rng.normal(0.0, 1.5, 4000)
+    weights, _ = psis(-0.5 * x**2 + 0.5 * (x / 1.5) ** 2)
+    assert abs(np.sum(weights * x**2) - 1.0) < 0.1
+
+
+def test_psis_says_no_when_one_draw_has_all_the_weight():
+    lw = np.full(256, -1e4)
+    lw[3] = 0.0
+    _, k = psis(lw)
+    assert k > 0.7
+
+
+def _sequence(rng, n, step_at=None, step=0.0):
+    s = rng.uniform(0.5, 2.0, n)
+    truth = np.where(np.arange(n) >= (step_at if step_at is not None else n), step, 0.0)
+    m = rng.normal(truth, s)
+    return m, m - 1.645 * s, m + 1.645 * s
+
+
+def test_cusum_false_alarm_rate_and_detection():
+    """In control (calibrated intervals, nothing changes): under 1 alarm in 300 drives. A step of
+    6 posterior std: dated at its first drive in most sequences."""
+    rng = np.random.default_rng(2)
+    alarms = drives = 0
+    for _ in range(1000):
+        m, lo, hi = _sequence(rng, 20)
+        alarms += len(detect_changes("c", "p", [str(i) for i in range(20)], m, lo, hi))
+        drives += 19
+    assert alarms / drives < 1 / 300
+    hits = 0
+    for _ in range(300):
+        s = np.ones(8)
+        m = rng.normal(np.where(np.arange(8) >= 4, 6.0, 0.0), s)
+        found = detect_changes("c", "p", [str(i) for i in range(8)], m, m - 1.645 * s, m + 1.645 * s)
+        hits += any(c.index == 4 and c.after > c.before for c in found)
+    assert hits / 300 > 0.5
+
+
+def _manifest(tmp_path, rows):
+    (tmp_path / "r.csv").write_text("t,steer\n0,0\n")
+    (tmp_path / "v.json").write_text("{}")
+    path = tmp_path / "manifest.csv"
+    path.write_text("car,recording,vehicle,time\n" + "".join(r + "\n" for r in rows))
+    return path
+
+
+def test_manifest_orders_drives_and_names_bad_lines(tmp_path, capsys):
+    path = _manifest(tmp_path, ["b,r.csv,v.json,2025-01-02", "a,r.csv,v.json,3", "a,../x.csv,v.json,1"])
+    with pytest.raises(ValueError, match=r"line 4: recording.*does not exist"):
+        read_manifest(path)
+    path = _manifest(tmp_path, ["b,r.csv,v.json,2025-01-02", "a,r.csv,v.json,3"])
+    drives = read_manifest(path)
+    assert [d.car for d in drives] == ["a", "b"] and drives[0].line == 3
+    path = _manifest(tmp_path, ["a,r.csv,v.json,yesterday"])
+    assert main(["fleet", str(path), "--out", str(tmp_path / "out")]) == 2
+    assert "line 2: time" in capsys.readouterr().err
+    path = _manifest(tmp_path, ["a,r.csv,v.json,1", "a,r.csv,v.json,2"])
+    assert main(["fleet", str(path), "--out", str(tmp_path / "out")]) == 2
+    assert "line 3: recording" in capsys.readouterr().err
+    (tmp_path / "bad.csv").write_text("car,recording,time\na,r.csv,1\n")
+    assert main(["fleet", str(tmp_path / "bad.csv"), "--out", str(tmp_path / "out")]) == 2
+    assert "missing column(s) vehicle" in capsys.readouterr().err
