@@ -103,6 +103,7 @@ def _flag(params: dict, fit, box: Box, informed_std) -> None:
         ratio, widened = float(informed_std[i]) / prior_std, p["std"] / prior_std
         p["estimate"] = float(fit.theta[i])
         p["std_ratio_to_prior"] = ratio
+        p["informed"] = n in fit.free
         p["identified"] = bool(n in fit.free and ratio <= MAX_STD_RATIO)
         if n not in fit.free:
             p["not_identified_because"] = "the channels do not depend on it in this mode"
@@ -226,7 +227,11 @@ def run_warnings(
             bounds,
             # Only what the drive does not inform: a parameter the box holds is what the edge
             # warning is for.
-            [n for n, p in summary["parameters"].items() if p["std_ratio_to_prior"] > MAX_STD_RATIO],
+            [
+                n
+                for n, p in summary["parameters"].items()
+                if not p.get("informed", True) or p["std_ratio_to_prior"] > MAX_STD_RATIO
+            ],
             coverage,
             command,
         )
