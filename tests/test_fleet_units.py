@@ -95,3 +95,58 @@ def test_manifest_orders_drives_and_names_bad_lines(tmp_path, capsys):
     (tmp_path / "bad.csv").write_text("car,recording,time\na,r.csv,1\n")
     assert main(["fleet", str(tmp_path / "bad.csv"), "--out", str(tmp_path / "out")]) == 2
     assert "missing column(s) vehicle" in capsys.readouterr().err
+
+
+def test_report_images_decode(tmp_path):
+    """Every plot of report.html is an embedded PNG that decodes: the page loads without fetching
+    anything."""
+    import base64
+    import io
+    import re
+
+    import matplotlib.image
+
+    from vdsbi.fleet._changes import Change
+    from vdsbi.fleet._report import write_report
+
+    def record(car, time, method, value):
+        p = {"estimate": value, "q05": value - 1, "q50": value, "q95": value + 1, "identified": True}
+        return {
+            "car": car,
+            "recording": f"{car}/{time}.csv",
+            "time": time,
+            "method": method,
+            "platform": "p",
+            "noise_ratio": {"ay": 1.2},
+            "parameters": {"l_f": p, "C_alpha_f": p},
+        }
+
+    records = [
+        record("a", "1", "amortized+fit", 1.0),
+        record("a", "2", "identify", 5.0),
+        record("b", "1", "amortized", 2.0),
+    ]
+    write_report(tmp_path / "report.html", records, [Change("a", "l_f", "2", 1, 1.0, 5.0)], 12.0)
+    page = (tmp_path / "report.html").read_text()
+    images = re.findall(r"src='data:image/png;base64,([^']+)'", page)
+    assert len(images) == 2
+    for data in images:
+        assert matplotlib.image.imread(io.BytesIO(base64.b64decode(data))).shape[0] > 50
+    assert "l_f from 2: 1 → 5" in page
+
+
+def test_cluster_by_address_sets_up_its_workers(tmp_path):
+    """`--address`: the client joins an existing scheduler and its workers get the JAX setup."""
+    distributed = pytest.importorskip("distributed")
+
+    from vdsbi.fleet import Cluster
+    from vdsbi.fleet._engine import open_client
+
+    def cache_dir():
+        import jax
+
+        return jax.config.jax_compilation_cache_dir
+
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, dashboard_address=None) as existing:
+        with open_client(Cluster(address=existing.scheduler_address, compilation_cache=tmp_path)) as client:
+            assert client.submit(cache_dir, pure=False).result() == str(tmp_path)

@@ -1,0 +1,119 @@
+"""Fleet throughput: drives per hour with 1 and 2 workers, time per drive of the amortized path
+against `identify`, the estimator's training time, and the extrapolation to 10⁴ drives on 100
+workers.
+
+    python benchmarks/fleet.py [--quick] [--cars N] [--drives N]
+
+One simulated fleet (`vdsbi.fleet.simulated_fleet`); the platform's estimator is trained once
+(timed), then the same drives are answered with 1 worker and with 2 (the estimator reused, as on
+every later night), and one drive by `vdsbi.api.identify` alone with identify's defaults. The
+extrapolation: T(N, W) = training + N · t_drive / W + N · overhead, with t_drive the median time a
+worker spends on a drive and the overhead per drive measured as the wall time the cluster adds
+beyond its workers' busy time.
+
+Writes benchmarks/results/fleet{_quick}.json and .md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+
+from fleet_sim import quick_settings  # noqa: E402
+
+from vdsbi import api  # noqa: E402
+from vdsbi.fleet import Cluster, FleetSettings, fleet, simulated_fleet  # noqa: E402
+
+RESULTS = Path(__file__).parent / "results"
+
+
+def _run(manifest, out, settings, workers, platforms=None) -> dict:
+    out.mkdir(parents=True, exist_ok=True)
+    if platforms is not None:
+        shutil.copytree(platforms, out / "platforms", dirs_exist_ok=True)
+    start = time.perf_counter()
+    res = fleet(manifest, out, settings, Cluster(workers=workers))
+    wall = time.perf_counter() - start
+    busy = [r["seconds"] for r in res.records]
+    return {
+        "workers": workers,
+        "drives": len(res.records),
+        "wall_seconds": round(wall, 1),
+        "drives_per_hour": round(len(res.records) / wall * 3600, 1),
+        "median_drive_seconds": round(float(np.median(busy)), 1),
+        "overhead_per_drive_seconds": round(max(0.0, wall - sum(busy) / workers) / len(res.records), 2),
+        "methods": res.methods(),
+        "training_seconds": _training(out),
+    }
+
+
+def _training(out: Path) -> float | None:
+    for f in (out / "platforms").glob("*/estimator.json"):
+        return json.loads(f.read_text())["training"].get("seconds")
+    return None
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="3 cars × 2 drives, the quick settings")
+    ap.add_argument("--cars", type=int, default=4)
+    ap.add_argument("--drives", type=int, default=3)
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.cars, args.drives = 3, 2
+    settings = quick_settings() if args.quick else FleetSettings()
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        manifest = simulated_fleet(root / "fleet", cars=args.cars, drives=args.drives, duration=30.0, seed=3)
+        trained = _run(manifest, root / "train", settings, 2)
+        one = _run(manifest, root / "one", settings, 1, platforms=root / "train" / "platforms")
+        two = _run(manifest, root / "two", settings, 2, platforms=root / "train" / "platforms")
+        drive = sorted((root / "fleet").glob("car01/drive0.csv"))[0]
+        start = time.perf_counter()
+        esc = settings.escalation
+        api.identify(drive, root / "fleet" / "vehicle.json", rounds=esc.rounds, sims=esc.sims, epochs=esc.epochs, holdout=0.0)
+        identify_seconds = time.perf_counter() - start
+    t_drive, overhead = two["median_drive_seconds"], two["overhead_per_drive_seconds"]
+    training = trained["training_seconds"] or 0.0
+    n, w = 10_000, 100
+    s = {
+        "first_run": trained,
+        "workers_1": one,
+        "workers_2": two,
+        "identify_seconds_one_drive": round(identify_seconds, 1),
+        "speedup_per_drive": round(identify_seconds / t_drive, 2),
+        "retrained": "once per platform; again only with --retrain or other estimator settings",
+        "extrapolated_10k_drives_100_workers_hours": round((training + n * t_drive / w + n * overhead) / 3600, 2),
+    }
+    RESULTS.mkdir(exist_ok=True)
+    name = "fleet_quick" if args.quick else "fleet"
+    (RESULTS / f"{name}.json").write_text(json.dumps(s, indent=1) + "\n")
+    md = [
+        f"# Fleet throughput ({args.cars} cars × {args.drives} drives of 30 s{', --quick' if args.quick else ''})",
+        "",
+        "| what | result |",
+        "|---|---|",
+        f"| estimator training (once per platform) | {training} s |",
+        f"| 1 worker | {one['drives_per_hour']} drives/h; median {one['median_drive_seconds']} s per drive; {one['methods']} |",
+        f"| 2 workers | {two['drives_per_hour']} drives/h; median {two['median_drive_seconds']} s per drive; {two['methods']} |",
+        f"| identify alone, one drive | {s['identify_seconds_one_drive']} s ({s['speedup_per_drive']}× the fleet's median drive) |",
+        f"| overhead per drive (2 workers) | {overhead} s |",
+        f"| 10⁴ drives on 100 workers (extrapolated) | {s['extrapolated_10k_drives_100_workers_hours']} h |",
+        "",
+    ]
+    (RESULTS / f"{name}.md").write_text("\n".join(md))
+    print("\n".join(md))
+    return s
+
+
+if __name__ == "__main__":
+    sys.exit(0 if main() else 1)
