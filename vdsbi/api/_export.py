@@ -158,10 +158,10 @@ def autoware(post: Mapping[str, Any], vehicle: Mapping[str, Any] | None, run_dir
         "# Estimates (the best fit of the drive: what `vdsbi predict` simulates); 90 % posterior",
         "# intervals [q05, q95], each parameter's own, and whether the drive identifies it alone:",
         f"#   vehicle.cf = C_alpha_f {_interval(caf, '.1f')} N/rad (front axle, both tyres: no conversion);"
-        f" {_status(caf)}",
-        f"#   vehicle.cr = C_alpha_r {_interval(car, '.1f')} N/rad (rear axle); {_status(car)}",
+        f" {identified_status(caf)}",
+        f"#   vehicle.cr = C_alpha_r {_interval(car, '.1f')} N/rad (rear axle); {identified_status(car)}",
         f"#   l_f = {_interval(lf, '.4f')} m (CoG to front axle; wheelbase {L:g} m, mass {m:g} kg);"
-        f" {_status(lf)}",
+        f" {identified_status(lf)}",
         f"#   mass_fl = mass_fr = m*l_r/(2L) = {front} kg [{lo['mass_fl']:.1f}, {hi['mass_fl']:.1f}]",
         f"#   mass_rl = mass_rr = m*l_f/(2L) = {rear} kg [{hi['mass_rl']:.1f}, {lo['mass_rl']:.1f}]",
         "#   (Autoware derives l_f = L*(1 - (mass_fl + mass_fr)/m) from these: the value above.)",
@@ -264,16 +264,18 @@ def _other_notes(params: Mapping[str, Any]) -> list[str]:
     lines = ["# The rest of the estimate (no Autoware key; part of what `vdsbi predict` simulates):"]
     for n in rest:
         p = params[n]
-        lines.append(f"#   {n} = {_interval(p, '.4g')} {p['unit']}; {_status(p)}")
+        lines.append(f"#   {n} = {_interval(p, '.4g')} {p['unit']}; {identified_status(p)}")
     return lines
 
 
-def _status(p: Mapping[str, Any]) -> str:
-    """Whether the drive identifies a parameter alone, and why not."""
+def identified_status(
+    p: Mapping[str, Any], yes: str = "identified", no: str = "NOT identified alone"
+) -> str:
+    """Whether the drive identifies a parameter alone, and why not (`yes` and `no` the words)."""
     if p.get("identified") is False:
         why = p.get("not_identified_because")
-        return f"NOT identified alone: {why}" if why else "NOT identified alone"
-    return "identified, moved by model error" if "model_error" in p else "identified"
+        return f"{no}: {why}" if why else no
+    return f"{yes}, moved by model error" if "model_error" in p else yes
 
 
 def _steering_notes(params: Mapping[str, Any]) -> list[str]:

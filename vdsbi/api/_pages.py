@@ -9,6 +9,7 @@ from typing import Any
 
 from ..simulator import PARAM_UNITS
 from . import _html as H
+from ._export import identified_status
 from ._held_out import held_out_verdict
 from .plots import display_unit
 
@@ -47,10 +48,7 @@ def parameter_rows(params: Mapping[str, Any]) -> list[list[str]]:
 
 
 def identified_cell(p: Mapping[str, Any]) -> str:
-    if p.get("identified") is False:
-        why = p.get("not_identified_because")
-        return f"no: {why}" if why else "no"
-    return "yes, moved by model error" if "model_error" in p else "yes"
+    return identified_status(p, "yes", "no")
 
 
 PARAM_HEADER = ["parameter", "unit", "estimate", "std", "90 % interval", "prior", "identified alone"]

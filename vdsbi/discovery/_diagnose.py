@@ -148,9 +148,16 @@ def _fit_base(coarse: Fitter, fitter: Fitter, vehicle: Vehicle, effects, s: Diag
     # waits for them rather than compile them a second time.
     compiling = in_background(fitter.fit, effects, max_iter=1, noise=ModelError(passes=0))
     starts = [None, coarse.initial_z(typical_theta(vehicle))]
-    base_c = min((coarse.fit(effects, z, max_iter=s.final_iters) for z in starts), key=lambda f: f.chi2)
+    # The starts are told apart after one re-measurement of the noise; the polish carries on
+    # from the better one's noise model.
+    once = ModelError(passes=1)
+    base_c = min(
+        (coarse.fit(effects, z, max_iter=s.final_iters, noise=once) for z in starts), key=lambda f: f.chi2
+    )
     compiling.result()  # compiled (or raised) before the polish calls it: never compiled twice
-    base = fitter.fit(effects, base_c.z, max_iter=max(4, s.final_iters // 2))
+    base = fitter.fit(
+        effects, base_c.z, max_iter=max(4, s.final_iters // 2), noise=ModelError(start=base_c.noise)
+    )
     say(
         f"base fit ({label(effects) if effects else 'θ alone'}): χ²/dof {base.chi2_dof:.3f} "
         f"({base.iterations} it, {say.seconds:.0f} s)"
