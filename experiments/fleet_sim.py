@@ -198,6 +198,8 @@ def main(argv=None) -> dict:
         s = score(root / "out", truth, result) | {"run_seconds": round(time.perf_counter() - start, 1)}
     RESULTS.mkdir(exist_ok=True)
     name = "fleet_sim_quick" if args.quick else "fleet_sim"
+    if result.answered == 0 and (RESULTS / f"{name}.json").exists():  # re-scored from saved answers
+        s["wall_seconds"] = json.loads((RESULTS / f"{name}.json").read_text())["wall_seconds"]
     (RESULTS / f"{name}.json").write_text(json.dumps(s, indent=1, default=list) + "\n")
     (RESULTS / f"{name}.md").write_text(markdown(s, args))
     print(markdown(s, args))

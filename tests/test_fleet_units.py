@@ -54,7 +54,7 @@ def _sequence(rng, n, step_at=None, step=0.0):
 
 def test_cusum_false_alarm_rate_and_detection():
     """In control (calibrated intervals, nothing changes): under 1 alarm in 300 drives. A step of
-    6 posterior std: dated at its first drive in most sequences."""
+    6 posterior std: caught and dated at its first drive in nearly every sequence."""
     rng = np.random.default_rng(2)
     alarms = drives = 0
     for _ in range(1000):
@@ -68,7 +68,7 @@ def test_cusum_false_alarm_rate_and_detection():
         m = rng.normal(np.where(np.arange(8) >= 4, 6.0, 0.0), s)
         found = detect_changes("c", "p", [str(i) for i in range(8)], m, m - 1.645 * s, m + 1.645 * s)
         hits += any(c.index == 4 and c.after > c.before for c in found)
-    assert hits / 300 > 0.5
+    assert hits / 300 > 0.9
 
 
 def _manifest(tmp_path, rows):
