@@ -67,7 +67,16 @@ def predict(
     rec = read_recording(inputs) if isinstance(inputs, (str, os.PathLike)) else inputs
     summary = post["problem"]
     cutoff = (summary.get("filter") or {}).get("cutoff_hz")
-    settings = ProblemSettings(longitudinal=post["problem"]["longitudinal"], held_out=0.0, bandwidth=cutoff)
+    # The run's own window length: a window simulated from its measured start state is scored as
+    # identify scored its held-out part.
+    spans = [w["t1"] - w["t0"] for w in summary.get("windows", ())]
+    window = float(np.ceil(max(spans) * 10.0) / 10.0) if spans else None
+    settings = ProblemSettings(
+        longitudinal=summary["longitudinal"],
+        held_out=0.0,
+        bandwidth=cutoff,
+        **({"max_window": window} if window else {}),
+    )
     prob = make_problem(rec, vehicle, settings)
     values = np.array([post["parameters"][n]["estimate"] for n in names])
     effect_values = _effect_values(values, names, effects)
