@@ -101,3 +101,28 @@ def test_a_parameter_is_identified_by_information_and_flagged_when_model_error_w
     assert [("model_error" in params[n]) for n in "abcd"] == [False, True, False, False]
     assert "60%" in params["c"]["not_identified_because"]
     assert "do not depend" in params["d"]["not_identified_because"]
+
+
+def test_a_combination_whose_draws_near_a_singularity_is_not_determined():
+    # The yaw-rate gain v/(L + K·v²) of draws whose understeer gradient K nears the critical
+    # −L/v² is unbounded: a few such draws give it a huge std and a meaningless interval.
+    from vdsbi.diagnostics import vehicle_combinations
+    from vdsbi.problem import Box, parameter_names, prior_box
+    from vdsbi.simulator import PARAM_NAMES, default_vehicle
+
+    veh = default_vehicle()
+    names = parameter_names()
+    box = Box.from_dict(prior_box(veh), PARAM_NAMES)
+    rng = np.random.default_rng(0)
+    prior = np.asarray(box.low) + rng.uniform(size=(4000, 6)) * np.asarray(box.width)
+    # a posterior tight on everything but a rear stiffness spread from oversteer to understeer
+    post = np.tile(np.asarray(box.low + 0.5 * box.width), (4000, 1))
+    post[:, 5] = np.linspace(0.7, 1.3, 4000) * post[0, 4] * (veh.wheelbase - post[0, 0]) / post[0, 0]
+    out = vehicle_combinations(post, names, veh, 30.0, prior, post)
+    gain = out["yaw_rate_gain"]
+    assert not gain["identified"]
+    # the same car with its stiffnesses pinned: determined
+    post[:, 5] = post[0, 4] * 1.2
+    assert vehicle_combinations(post + rng.normal(0, 1e-6, post.shape), names, veh, 30.0, prior)[
+        "yaw_rate_gain"
+    ]["identified"]

@@ -24,6 +24,13 @@ from ..simulator import GRAVITY, Vehicle
 DETERMINED_RATIO = 0.5
 
 
+def _spread(x: np.ndarray) -> float:
+    """The interquartile range over 1.349 (a normal's std): robust to the unbounded tails a
+    combination takes where a draw nears a singularity."""
+    q1, q3 = np.percentile(x, [25, 75])
+    return float(q3 - q1) / 1.349
+
+
 def _interval(x: np.ndarray) -> dict[str, float]:
     q = np.quantile(x, [0.025, 0.5, 0.975])
     return {"median": float(q[1]), "q025": float(q[0]), "q975": float(q[2]), "std": float(np.std(x))}
@@ -39,7 +46,8 @@ def vehicle_combinations(
 ) -> dict[str, dict]:
     """Understeer gradient (deg/g) and steady-state yaw-rate gain at `speed` (1/s) over (N, P)
     posterior draws, with 95 % intervals; with `prior_samples` each also says whether the drive
-    determines it (`identified`: std at most `DETERMINED_RATIO` of the prior's, the rule single
+    determines it (`identified`: robust spread at most `DETERMINED_RATIO` of the prior's and a
+    95 % interval as narrow, the rule single
     parameters and directions follow), read from `informed_samples` where given (draws of what
     the drive's information alone allows, before model error widens the posterior)."""
     post = _combinations(samples, names, vehicle, speed)
@@ -50,8 +58,15 @@ def vehicle_combinations(
     for key, unit, at in kinds:
         out[key] = {"unit": unit, "at": at} | _interval(post[key])
         if prior is not None:
-            ratio = float(np.std(told[key]) / np.std(prior[key]))
-            out[key] |= {"std_ratio_to_prior": ratio, "identified": ratio <= DETERMINED_RATIO}
+            ratio = float(_spread(told[key]) / _spread(prior[key]))
+            # The interval too: a gain near the critical speed of an oversteering draw is unbounded,
+            # and its tails must not pass for a determined value.
+            width = out[key]["q975"] - out[key]["q025"]
+            bounded = width <= DETERMINED_RATIO * 3.92 * _spread(prior[key])
+            out[key] |= {
+                "std_ratio_to_prior": ratio,
+                "identified": bool(ratio <= DETERMINED_RATIO and bounded),
+            }
     return out
 
 
