@@ -98,7 +98,9 @@ def test_formula_reads_as_an_equation():
     assert term_formula("side_constant", -0.2).startswith("lateral force += -0.2·m ")
 
 
-def _section(p_before, p_after, held_after, held_terms, effects=("torque_gain",), terms=None, p_terms=None):
+def _section(
+    p_before, p_after, held_after, held_terms, effects=("torque_gain",), terms=None, p_terms=None, tau=None
+):
     from types import SimpleNamespace as NS
 
     from vdsbi.discovery import terms_section
@@ -117,6 +119,7 @@ def _section(p_before, p_after, held_after, held_terms, effects=("torque_gain",)
         held_terms=held_terms,
         n_held=100,
         alpha=0.05,
+        tau=tau,
     )
 
 
@@ -130,7 +133,11 @@ def test_explanation_says_what_explained_the_mismatch():
     # the residual test passes but the held-out χ²/dof stays above 1.1: not claimed
     assert _section(0.001, 0.2, held, None)["explanation"] == "unexplained"
     out = _section(0.001, 0.001, held, better, terms=term, p_terms=0.3)
-    assert out["explanation"] == "discovered term" and out["held_out_gain"] == pytest.approx(25.0)
+    assert out["explanation"] == "discovered term"
+    assert out["held_out_gain"] == pytest.approx(50.0 * (np.log(1.3) + np.log(1.2)))
+    # the same gain on a residual correlated over 40 samples: 40 times fewer independent samples
+    out = _section(0.001, 0.001, held, better, terms=term, p_terms=0.3, tau={"ay": 40.0, "yaw_rate": 40.0})
+    assert out["explanation"] == "unexplained" and out["held_out_gain"] < 3.0
     assert "ay + 0.05·ay" in out["sentence"]
     # a term that does not predict the held-out part better is not claimed
     out = _section(0.001, 0.001, held, same, terms=term, p_terms=0.3)

@@ -287,6 +287,7 @@ def _conclude(before, decision, base, after, held, terms, test_terms, windows: P
         held_terms=held.get("after_terms"),
         n_held=int(windows.held.sum()),
         alpha=s.alpha,
+        tau=dict(zip(base.noise.channels, base.noise.tau)),
     )
     text = concl["text"] + (f"; {section['sentence']}" if section.get("sentence") else "")
     found = Verdict(detected, named, concl["explained"], improved, section["explanation"], text, dropped)

@@ -18,7 +18,7 @@ through the differentiable simulator:
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import equinox as eqx
 import jax
@@ -200,16 +200,19 @@ def terms_section(
     held_terms: dict | None,
     n_held: int,
     alpha: float,
+    tau: Mapping[str, float] | None = None,
 ) -> dict:
     """The discovered terms, their held-out fit and test, and what explained the mismatch:
     "discovered term" (kept terms that also predict the held-out part better: held-out
-    log-likelihood gain ½·Σ(χ²_library − χ²_terms) ≥ `STRONG`), "library" (the chosen effects
-    leave p ≥ α/10 and a held-out χ²/dof ≤ `claim_limit` in every channel), "unexplained",
-    or "none" (no mismatch).
+    log-likelihood gain ½·Σ_c (N/τ_c)·ln(χ²_library,c / χ²_terms,c) ≥ `STRONG`, each channel's
+    N held-out samples counted by its residual's autocorrelation time τ_c, as the evidence is),
+    "library" (the chosen effects leave p ≥ α/10 and a held-out χ²/dof ≤ `claim_limit` in every
+    channel), "unexplained", or "none" (no mismatch).
 
     `p_before`, `p_after`, `p_terms`: the residual tests of the base fit, the chosen effects'
     fit and the refit with the terms; `held_after`, `held_terms` the held-out scores per
-    channel after the library fix and with the terms; `n_held` held-out samples per channel."""
+    channel after the library fix and with the terms; `n_held` held-out samples per channel;
+    `tau` each channel's residual autocorrelation time (default 1: white)."""
     detected = bool(p_before < alpha)
     worst = worst_channel(held_after)
     held_ok = worst[1] <= claim_limit(worst[2])
@@ -229,7 +232,11 @@ def terms_section(
     out["discovered_terms"], out["terms_replace"] = td.terms, list(td.dropped)
     out["p_value_after_terms"] = float(p_terms)
     out["fit"] = held_terms
-    gain = 0.5 * n_held * sum(held_after[c]["chi2_dof"] - held_terms[c]["chi2_dof"] for c in held_terms)
+    tau = tau or {}
+    gain = 0.5 * sum(
+        n_held / tau.get(c, 1.0) * np.log(held_after[c]["chi2_dof"] / held_terms[c]["chi2_dof"])
+        for c in held_terms
+    )
     out["held_out_gain"] = float(gain)
     mean = lambda d: float(np.mean([v["chi2_dof"] for v in d.values()]))
     formulas = "; ".join(t["formula"] for t in td.terms)
