@@ -16,6 +16,7 @@ Levels (the `method` of estimates.csv):
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import os
 import socket
@@ -88,7 +89,10 @@ def answer_drive(
     folder.mkdir(parents=True, exist_ok=True)
     attempt = _mark_running(folder)
     platform, est_folder, no_estimator = prepared
-    key = jax.random.fold_in(jax.random.key(seed), int(drive.key.rsplit("-", 1)[-1], 16) % (2**31))
+    # Keyed by what the manifest says (car and recording), not where the files lie: the same
+    # manifest answers alike from any folder.
+    own = int(hashlib.sha1(f"{drive.car}\n{drive.name}".encode()).hexdigest()[:8], 16)
+    key = jax.random.fold_in(jax.random.key(seed), own % (2**31))
     record = {
         "car": drive.car,
         "recording": drive.name,
