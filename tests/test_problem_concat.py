@@ -47,7 +47,8 @@ def test_two_recordings_become_one_problem_each_window_from_its_own_state():
     # (the last compared samples of the longest window sit at the filter's edge in `b` alone)
     k = b.y.shape[1]
     inner = b.train & (np.arange(k) < k - 8)
-    np.testing.assert_allclose(pred_both[a.num_windows :, :k][inner], pred_b[inner], rtol=1e-4, atol=1e-5)
+    # (float32 in a batch of another size: XLA may vectorise the steps differently, 1e-4 apart)
+    np.testing.assert_allclose(pred_both[a.num_windows :, :k][inner], pred_b[inner], rtol=1e-4, atol=1e-4)
 
 
 def test_recordings_with_other_channels_are_refused_by_name():

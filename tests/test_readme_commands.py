@@ -73,6 +73,10 @@ def test_a_readme_command_reaches_the_library_call(command, tmp_path, monkeypatc
     for name in ("observability", "design"):
         monkeypatch.setattr(api, name, reached(name))
     monkeypatch.setattr(api.outputs, "write_export", reached("export"))
+    import vdsbi.fleet
+
+    monkeypatch.setattr(vdsbi.fleet, "fleet", reached("fleet"))
+    (tmp_path / "manifest.csv").write_text("car,recording,vehicle,time\na,rec.csv,vehicle.json,1\n")
     monkeypatch.chdir(tmp_path)
     argv = shlex.split(command)[1:]
     with pytest.raises(_Reached):

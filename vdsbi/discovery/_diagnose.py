@@ -275,7 +275,8 @@ def _conclude(before, decision, base, after, held, terms, test_terms, windows: P
     dropped = tuple(e for e in base.effects if e not in decision.chosen)
     changed = named + tuple(f"no {e}" for e in dropped)
     detected = p_before < s.alpha
-    improved = held_out_improves(held["before"], held["after"]) if changed else None
+    tau = dict(zip(base.noise.channels, base.noise.tau))
+    improved = held_out_improves(held["before"], held["after"], tau) if changed else None
     concl = verdict(detected, changed, p_after, s.alpha, improved, worst_channel(held["after"]))
     section = terms_section(
         p_before=p_before,
@@ -287,7 +288,7 @@ def _conclude(before, decision, base, after, held, terms, test_terms, windows: P
         held_terms=held.get("after_terms"),
         n_held=int(windows.held.sum()),
         alpha=s.alpha,
-        tau=dict(zip(base.noise.channels, base.noise.tau)),
+        tau=tau,
     )
     text = concl["text"] + (f"; {section['sentence']}" if section.get("sentence") else "")
     found = Verdict(detected, named, concl["explained"], improved, section["explanation"], text, dropped)
@@ -296,16 +297,24 @@ def _conclude(before, decision, base, after, held, terms, test_terms, windows: P
     return found, section, held
 
 
-#: A channel's held-out χ²/dof may grow by this share and the fix still count as an improvement
-#: (the held-out part's own sampling noise), if the channels' mean falls.
+#: A channel's held-out χ²/dof may grow by this share and the fix still count as an improvement,
+#: if the channels' mean falls; or by two standard deviations of its χ²/dof (the held-out part's
+#: own sampling noise: 2·√(2τ/N) relative, N samples correlated over τ) where that is more.
 HELD_OUT_SLACK = 0.02
 
 
-def held_out_improves(before: dict, after: dict) -> bool:
+def held_out_improves(before: dict, after: dict, tau: dict | None = None) -> bool:
     """Whether a fix improves the held-out fit: the channels' mean χ²/dof falls and none grows by
-    more than `HELD_OUT_SLACK`. A fix that trades one channel's fit for another's is not one."""
+    more than its slack (`HELD_OUT_SLACK`). A fix that trades one channel's fit for another's is
+    not one. `tau`: each channel's residual autocorrelation time (default 1)."""
+    tau = tau or {}
+
+    def slack(c):
+        n = before[c].get("samples")
+        return max(HELD_OUT_SLACK, 2.0 * np.sqrt(2.0 * tau.get(c, 1.0) / n)) if n else HELD_OUT_SLACK
+
     mean = lambda h: float(np.mean([v["chi2_dof"] for v in h.values()]))
-    worse = any(after[c]["chi2_dof"] > (1 + HELD_OUT_SLACK) * before[c]["chi2_dof"] for c in before)
+    worse = any(after[c]["chi2_dof"] > (1 + slack(c)) * before[c]["chi2_dof"] for c in before)
     return bool(mean(after) < mean(before) and not worse)
 
 
