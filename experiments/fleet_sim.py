@@ -115,8 +115,9 @@ def markdown(s: dict, args) -> str:
     return "\n".join(lines)
 
 
-def real(folder: Path, workers: int) -> dict:
-    """The real drives as a fleet, each answer beside its own identify."""
+def real(folder: Path, workers: int, answered: Path | None = None) -> dict:
+    """The real drives as a fleet, each answer beside its own identify (`answered`: a fleet
+    output of these drives to read the fleet's answers from instead of running it)."""
     import pandas as pd
 
     from vdsbi import api
@@ -126,13 +127,26 @@ def real(folder: Path, workers: int) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         manifest = Path(tmp) / "manifest.csv"
         pd.DataFrame(rows).to_csv(manifest, index=False)
-        result = fleet(manifest, Path(tmp) / "out", FleetSettings(), Cluster(workers=workers), log=print)
+        fleet_out = answered or Path(tmp) / "out"
+        if answered is None:
+            records = fleet(manifest, fleet_out, FleetSettings(), Cluster(workers=workers), log=print).records
+        else:
+            records = [json.loads(f.read_text()) for f in sorted((answered / "drives").glob("*/result.json"))]
+        platforms = {}
+        for f in (fleet_out / "platforms").glob("*/platform.json"):
+            record = json.loads(f.read_text())["platform"]
+            platforms[record["id"]] = record["effects"]
         out = {}
-        for r in result.records:
+        for r in records:
+            if r["car"] not in {x["car"] for x in rows}:
+                continue
+            if not r.get("parameters"):
+                out[r["car"]] = {"method": r["method"], "error": r.get("error"), "fleet_seconds": r["seconds"]}
+                continue
             row = next(x for x in rows if x["car"] == r["car"])
-            effects = json.loads(next((Path(tmp) / "out" / "platforms").glob("*/platform.json")).read_text())
+            effects = platforms.get(r.get("platform"))  # None: identify's own defaults, as the fleet's
             start = time.perf_counter()
-            alone = api.identify(row["recording"], row["vehicle"], effects=effects["platform"]["effects"], holdout=0.0)
+            alone = api.identify(row["recording"], row["vehicle"], effects=effects, holdout=0.0)
             seconds = time.perf_counter() - start
             params = {}
             for name, p in r.get("parameters", {}).items():
@@ -154,6 +168,9 @@ def real(folder: Path, workers: int) -> dict:
 def real_markdown(s: dict) -> str:
     lines = ["# The shared real drives as a fleet", ""]
     for car, r in s.items():
+        if "parameters" not in r:
+            lines += [f"## {car}: {r['method']} in {r['fleet_seconds']} s: {r.get('error')}", ""]
+            continue
         checks = ", ".join(f"{k} k̂ {v['k_hat']}" for k, v in (r["checks"] or {}).items())
         lines += [
             f"## {car}: {r['method']} ({checks}); {r['fleet_seconds']} s in the fleet, identify alone {r['identify_seconds']} s",
@@ -170,6 +187,7 @@ def real_markdown(s: dict) -> str:
 
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--answered", default=None, help="with --real: a fleet output to read the answers from")
     ap.add_argument("--real", nargs="?", const=str(Path(__file__).resolve().parents[2] / "shared" / "real"), default=None)
     ap.add_argument("--quick", action="store_true", help="3 cars × 3 drives, a small estimator")
     ap.add_argument("--cars", type=int, default=6)
@@ -180,7 +198,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", default=None, help="keep the fleet and its output here")
     args = ap.parse_args(argv)
     if args.real is not None:
-        s = real(Path(args.real), args.workers)
+        s = real(Path(args.real), args.workers, None if args.answered is None else Path(args.answered))
         RESULTS.mkdir(exist_ok=True)
         (RESULTS / "fleet_real.json").write_text(json.dumps(s, indent=1) + "\n")
         (RESULTS / "fleet_real.md").write_text(real_markdown(s))
