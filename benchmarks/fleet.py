@@ -86,7 +86,7 @@ def main(argv=None) -> dict:
         else:
             platforms = Path(args.platforms)
             cold = _run(manifest, root / "cold", settings, 2, cache, platforms=platforms)
-            cold |= {"training_seconds": _training(platforms.parent), "reused": str(platforms)}
+            cold |= {"training_seconds": _training(platforms.parent), "estimator_reused": True}
         one = _run(manifest, root / "one", settings, 1, cache, platforms=platforms)
         two = _run(manifest, root / "two", settings, 2, cache, platforms=platforms)
         drive = sorted((root / "fleet").glob("car01/drive0.csv"))[0]
