@@ -55,6 +55,15 @@ def test_names_sensor_bias_and_the_fit_improves(quick):
     assert r["mean_chi2_after"] < 1.3
 
 
+def test_after_fit_intervals_are_scored(quick):
+    r = json.loads((_case(quick, "sensor_bias") / "result.json").read_text())
+    for name, (lo, hi) in r["theta_q05_q95_after"].items():
+        assert lo < r["theta_after"][name] < hi
+    summary = json.loads((quick / "out" / "concealed_effects_quick.json").read_text())["summary"]
+    inside, total = map(int, summary["theta_inside_90_after_count"].split(" of "))
+    assert total == 12 and len(summary["theta_outside_90_after"]) == total - inside
+
+
 def test_report_has_required_keys(quick):
     rep = json.loads((_case(quick, "sensor_bias") / "report.json").read_text())
     for k in REQUIRED_KEYS:

@@ -65,6 +65,9 @@ def test_the_fit_recovers_the_stiffnesses_from_a_poor_start_and_its_interval_hol
     z = np.abs(post.theta - THETA) / draws.std(0)
     assert np.all(z[4:] < 3.0), z  # the truth within three posterior standard deviations
     assert post.mahalanobis2(post.theta)[0] < 1e-6
+    # The interval is the draws' central 90 %: quantiles map exactly through the monotone box.
+    q = np.quantile(draws, [0.05, 0.95], axis=0).T
+    np.testing.assert_allclose(post.interval(0.9)[4:], q[4:], rtol=2e-3)
 
 
 def test_a_wrong_start_speed_is_corrected_per_window_and_leaves_the_estimate_where_it_was(x64):

@@ -369,4 +369,5 @@ class Fitter:
             cov=cov,
             rss=np.sum(post.residual**2, axis=(0, 1)),
             noise=post.noise,
+            theta_interval=post.interval(0.9)[:6],
         )

@@ -63,6 +63,10 @@ def _theta_dict(x) -> dict:
     return {n: float(v) for n, v in zip(PARAM_NAMES, x)}
 
 
+def _interval_dict(x) -> dict | None:
+    return None if x is None else {n: [float(a), float(b)] for n, (a, b) in zip(PARAM_NAMES, x)}
+
+
 class Findings(NamedTuple):
     """What `diagnose_mismatch` found and concluded, before it becomes a `DiagnosisResult` and a report
     (fields as `DiagnosisResult`'s, and: `held_out_shown`, the held-out scores the report
@@ -142,6 +146,10 @@ def _parameters(base: DiscoveryFit, final: DiscoveryFit, fitter: Fitter) -> dict
         "fit_train_chi2_dof": {"before": base.chi2_dof, "after": final.chi2_dof},
         "theta": {"before": _theta_dict(base.theta), "after": _theta_dict(final.theta)},
         "theta_std": {"before": _theta_dict(base.theta_std), "after": _theta_dict(final.theta_std)},
+        "theta_q05_q95": {
+            "before": _interval_dict(base.theta_interval),
+            "after": _interval_dict(final.theta_interval),
+        },
         "v0": {"before": base.v0.tolist(), "after": final.v0.tolist()},
         "at_bounds": _at_bounds(final, fitter),
         "effect_params": final.effect_params,

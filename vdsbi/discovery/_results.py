@@ -39,6 +39,7 @@ class DiscoveryFit:
             noise model; start speeds from their own information).
         rss: (C,) Σ residual² per channel over the fitted samples, channel units.
         noise: the estimator's noise model at the fit (`vdsbi.estimation.NoiseModel`).
+        theta_interval: (6, 2) the estimator's 90 % interval of θ.
     """
 
     effects: tuple[str, ...]
@@ -59,6 +60,7 @@ class DiscoveryFit:
     cov: np.ndarray
     rss: np.ndarray | None = None
     noise: Any = None
+    theta_interval: np.ndarray | None = None
 
     @property
     def chi2_dof(self) -> float:

@@ -28,6 +28,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy.stats import norm
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..problem import Box, Problem, parameter_names, simulate_draws, windowed_model
@@ -105,6 +106,13 @@ class LikelihoodPosterior(eqx.Module):
     def theta(self) -> np.ndarray:
         """The best fit (MAP), in parameter units."""
         return np.asarray(self.box.from_unbounded(self.z))
+
+    def interval(self, level: float = 0.9) -> np.ndarray:
+        """(P, 2) central `level` interval of each parameter, in parameter units: the Gaussian
+        marginal in z mapped through the box (monotone, so its quantiles map exactly)."""
+        half = norm.ppf(0.5 + level / 2) * np.sqrt(np.clip(np.diag(self.cov_z), 0.0, None))
+        ends = np.stack([self.z - half, self.z + half])
+        return np.asarray(jax.vmap(self.box.from_unbounded)(jnp.asarray(ends))).T
 
     def sample(self, key: PRNGKeyArray, n: int, *, information_only: bool = False) -> Float[Array, "n P"]:
         """`n` draws in parameter units (Gaussian in z, mapped into the box); with
