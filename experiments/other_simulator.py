@@ -375,7 +375,9 @@ def write_drive(
         "wheel_inertia": 1.5,
         "tire_vertical_stiffness": 250000.0,
         "friction": friction,
-        "relaxation_length": 0.3,
+        # The other simulator's tyres make force at once (no relaxation); 0.3 m here would be a
+        # lag of 0.3/v s that the fitted delay or lag then gives back.
+        "relaxation_length": 0.05,
     }
     (folder / "vehicle.json").write_text(json.dumps(vehicle, indent=2) + "\n")
     truth = {

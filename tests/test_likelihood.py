@@ -4,7 +4,7 @@ Laplace covariance."""
 import numpy as np
 import pytest
 
-from vdsbi.estimation import ModelError, fit_likelihood
+from vdsbi.estimation import ModelError, fit_likelihood, prior_mean
 from vdsbi.io import build_recording
 from vdsbi.problem import (
     Box,
@@ -314,3 +314,22 @@ def test_a_delay_the_model_lacks_moves_the_transient_half_against_the_steady_one
         cov, jac, r, np.array([gain]), np.array([1e-6]), [(transient, splits[transient])]
     )
     assert shifts and shifts[0]["sigmas"] > 2.0
+
+
+def test_the_prior_sits_at_an_effects_start_and_at_the_least_effect_a_box_allows():
+    from vdsbi.simulator import EFFECTS
+
+    friction = EFFECTS["tyre_friction"]
+    names = (*PARAM_NAMES, "tyre_friction.scale_front", "tyre_friction.scale_rear")
+    veh = default_vehicle()
+    bounds = prior_box(veh, ("tyre_friction",))
+    box = Box.from_dict(bounds, names)
+    mode = np.asarray(box.from_unbounded(prior_mean(box, (friction,))))
+    np.testing.assert_allclose(mode[6:], friction.start, rtol=1e-6)  # not the box's centre, 1.1
+    np.testing.assert_allclose(mode[:6], 0.5 * (np.asarray(box.low) + np.asarray(box.high))[:6], rtol=1e-6)
+    # A grip floor above the start: the mode is just inside the floor.
+    floored = Box.from_dict(prior_box(veh, ("tyre_friction",), grip=1.2), names)
+    mode = np.asarray(floored.from_unbounded(prior_mean(floored, (friction,))))
+    low, high = np.asarray(floored.low)[6:], np.asarray(floored.high)[6:]
+    assert np.all(low > 1.0)
+    np.testing.assert_allclose(mode[6:], low + 0.05 * (high - low), rtol=1e-6)

@@ -12,6 +12,7 @@ from ._likelihood import (
     PRIOR_Z_STD as PRIOR_Z_STD,
     LikelihoodPosterior as LikelihoodPosterior,
     fit_likelihood as fit_likelihood,
+    prior_mean as prior_mean,
     split_values as split_values,
 )
 from ._noise import (

@@ -73,6 +73,7 @@ class LikelihoodPosterior(eqx.Module):
             the fitted part.
         jacobian: (W, K, C, k + W') its derivative by the free coordinates (in `free`'s order),
             then by each corrected window's start speed (W' = 0 where none is corrected).
+        prior_mean: (P,) the prior's mode in logit coordinates (`prior_mean`).
     """
 
     box: Box
@@ -90,6 +91,7 @@ class LikelihoodPosterior(eqx.Module):
     part: str = eqx.field(static=True, default="train")
     residual: np.ndarray | None = None
     jacobian: np.ndarray | None = None
+    prior_mean: np.ndarray | None = None
 
     @property
     def chi2_dof(self) -> float:
@@ -232,8 +234,10 @@ def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, wid
     kw = k if width is None else max(int(width), k)
     # Padding slots index past the end: nothing reads them, their prior holds them at 0.
     padded = np.concatenate([idx, np.full(kw - k, len(names))]).astype(int)
-    fit = _fitter(wm, data, mask, box64, sizes, z0, start, padded, max_steps)
     n_v = corrected_windows(data)
+    mean = prior_mean(box, wm.model.effects)
+    p_mean = np.concatenate([mean[idx], np.zeros(kw - k + n_v)])
+    fit = _fitter(wm, data, mask, box64, sizes, z0, start, padded, p_mean, max_steps)
     p, steps = jnp.asarray(np.concatenate([z0[idx], np.zeros(kw - k + n_v)])), []
     sensor_only = isinstance(noise, SensorNoise)
     for _ in range(passes + 1):
@@ -250,7 +254,7 @@ def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, wid
     raw = np.asarray(res.jacobian).reshape(*mask.shape, len(scale), kw + n_v)
     raw = np.concatenate([raw[..., :k], raw[..., kw:]], axis=-1)
     jac = raw * (std / scale)[:, None]
-    cov_free, informed, shifts, joint, curvature = _covariances(data, mask, jac, resid / scale, z, tau)
+    cov_free, informed, shifts, joint, curvature = _covariances(data, mask, jac, resid / scale, z - mean[idx], tau)
     cov, cov_info = (np.diag(np.full(len(names), PRIOR_Z_STD**2)) for _ in range(2))
     cov[np.ix_(idx, idx)] = cov_free
     cov_info[np.ix_(idx, idx)] = informed
@@ -274,6 +278,7 @@ def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, wid
         part,
         resid,
         raw * std[:, None],
+        mean,
     )
 
 
@@ -296,6 +301,25 @@ def _covariances(data: Problem, mask, jac, r, z, tau):
     splits = data_splits(data, mask)
     widened, shifts, joint = consistent_covariance(informed, jac_tau, r / root_tau, z, prec, splits)
     return widened, informed, shifts, joint, curvature
+
+
+#: The prior's mode stays this far inside the box (a share of its width), so its logit is finite.
+MODE_MARGIN = 0.05
+
+
+def prior_mean(box: Box, effects: Sequence) -> np.ndarray:
+    """(P,) the prior's mode in logit coordinates: θ at its box's centre; an effect's parameter
+    at the effect's `start` (what a car has unless the drive says otherwise: friction factors of
+    1, little downforce), moved `MODE_MARGIN` inside the box where the box excludes it (a grip
+    floor, a range a diagnosis measured): the least effect the box allows. A parameter the drive
+    does not inform then stays where the car most likely is, not at the middle of what any car
+    could have."""
+    starts = np.concatenate([np.full(len(PARAM_NAMES), np.nan), *[np.asarray(e.start, float) for e in effects]])
+    if len(starts) != len(box.names):
+        raise ValueError(f"{len(starts)} starts for a box over {len(box.names)} parameters")
+    u = (starts - np.asarray(box.low, float)) / np.asarray(box.width, float)
+    u = np.where(np.isfinite(u), np.clip(u, MODE_MARGIN, 1.0 - MODE_MARGIN), 0.5)
+    return np.log(u) - np.log1p(-u)
 
 
 def split_values(values, sizes: Sequence[int]) -> tuple:
@@ -351,7 +375,7 @@ def _residual(wm, y, mask, box: Box, sizes, z0, start, idx, p, std):
 
 
 @eqx.filter_jit
-def _lm(wm, y, mask, box: Box, sizes, z0, start, idx, p, std, max_steps):
+def _lm(wm, y, mask, box: Box, sizes, z0, start, idx, p, mean, std, max_steps):
     """One Levenberg–Marquardt fit of the free coordinates and start-speed corrections for given
     per-channel stds; a module-level jit, so every fit of the same shapes (the reweighting passes,
     the refit, every candidate of a search) compiles once."""
@@ -362,6 +386,7 @@ def _lm(wm, y, mask, box: Box, sizes, z0, start, idx, p, std, max_steps):
         fn,
         p,
         prior_precision=prec.astype(p.dtype),
+        prior_mean=mean.astype(p.dtype),
         max_steps=max_steps,
         max_step=MAX_Z_STEP,
         # Without start speeds to correct, the plain forward-mode Jacobian.
@@ -369,9 +394,10 @@ def _lm(wm, y, mask, box: Box, sizes, z0, start, idx, p, std, max_steps):
     )
 
 
-def _fitter(wm, data: Problem, mask, box: Box, sizes, z0, start, idx, max_steps):
+def _fitter(wm, data: Problem, mask, box: Box, sizes, z0, start, idx, mean, max_steps):
     """The fit of the free coordinates as a function of (start, per-channel stds)."""
     y, m = jnp.asarray(data.y), jnp.asarray(mask)
     steps = jnp.asarray(max_steps)
     z0, start, idx = jnp.asarray(z0), jnp.asarray(start, jnp.float64), jnp.asarray(idx)
-    return lambda p, std: _lm(wm, y, m, box, tuple(sizes), z0, start, idx, p, std, steps)
+    mean = jnp.asarray(mean, jnp.float64)
+    return lambda p, std: _lm(wm, y, m, box, tuple(sizes), z0, start, idx, p, mean, std, steps)

@@ -92,13 +92,14 @@ def _cost_function(posterior: LikelihoodPosterior, problem: Problem, effects, id
     mask = np.asarray(data.part(posterior.part))
     wm = windowed_model(data, effects, solver)
     weight = 1.0 / (np.asarray(posterior.noise.scale) ** 2 * np.asarray(posterior.noise.tau))
+    mean = 0.0 if posterior.prior_mean is None else np.asarray(posterior.prior_mean)[idx]
 
     def cost(z: np.ndarray) -> np.ndarray:
         theta = jax.vmap(posterior.box.from_unbounded)(z)
         th, ep = split_parameters(theta, effects)
         pred, ok = simulate_draws(None, wm, th, effect_params=ep)
         r2 = np.where(mask[..., None], (np.asarray(pred, float) - data.y) ** 2, 0.0)
-        c = 0.5 * np.sum(r2 * weight, axis=(1, 2, 3)) + 0.5 * np.sum(z[:, idx] ** 2, 1) / PRIOR_Z_STD**2
+        c = 0.5 * np.sum(r2 * weight, axis=(1, 2, 3)) + 0.5 * np.sum((z[:, idx] - mean) ** 2, 1) / PRIOR_Z_STD**2
         return np.where(np.asarray(ok), np.nan_to_num(c, nan=np.inf), np.inf)
 
     return cost

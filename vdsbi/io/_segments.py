@@ -53,8 +53,8 @@ def label_runs(labels: np.ndarray) -> list[tuple[int, int]]:
 LATERAL_FLOOR = 0.005 * GRAVITY
 #: ... and it must stand this many noise stds (of the 0.5 s mean) above the noise.
 NOISE_MULTIPLE = 3.0
-#: Axle cornering stiffness per axle load, /rad, for the lateral time constant: the geometric
-#: centre of the prior box's 3–30 /rad (`Vehicle.default_prior`).
+#: Axle cornering stiffness per axle load, /rad, for the lateral time constant: a typical
+#: passenger car's.
 CORNERING_PER_LOAD = float(np.sqrt(3.0 * 30.0))
 #: A window fits at least this many lateral time constants after its burn-in ...
 SETTLE = 5.0

@@ -148,8 +148,8 @@ class Vehicle(eqx.Module):
         """Uniform prior box: physically valid ranges scaled to this vehicle, then overrides.
 
         Stiffnesses are expressed per axle relative to the static axle load m·g/2: cornering
-        stiffness 3–30 /rad and longitudinal slip stiffness 3–40 times the load cover passenger
-        cars from soft winter tires to stiff performance tires.
+        stiffness 3–50 /rad and longitudinal slip stiffness 3–40 times the load cover soft winter
+        tyres to race slicks, whose stiffness grows with the load downforce adds.
         """
         L = float(self.wheelbase)
         load = float(self.mass) * GRAVITY / 2
@@ -158,8 +158,8 @@ class Vehicle(eqx.Module):
             "h_cog": (0.2, 1.0),
             "C_kappa_f": (3 * load, 40 * load),
             "C_kappa_r": (3 * load, 40 * load),
-            "C_alpha_f": (3 * load, 30 * load),
-            "C_alpha_r": (3 * load, 30 * load),
+            "C_alpha_f": (3 * load, 50 * load),
+            "C_alpha_r": (3 * load, 50 * load),
         }
         box.update(self.prior)
         return box
