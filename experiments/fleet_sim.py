@@ -46,7 +46,9 @@ SCORED = ("l_f", "C_alpha_f", "C_alpha_r", "signal_delay.delay")
 
 def quick_settings() -> FleetSettings:
     """A small estimator and a short identify: what the tests run."""
-    training = TrainingSettings(batch_size=128, learning_rate=1e-3, max_epochs=8, patience=4, cosine_decay=True)
+    training = TrainingSettings(
+        batch_size=128, learning_rate=1e-3, max_epochs=8, patience=4, cosine_decay=True
+    )
     return FleetSettings(
         amortized=AmortizedSettings(simulations=600, training=training, draws_per_window=200),
         escalation=Escalation(rounds=1, sims=100, epochs=2, ppc_draws=10),
@@ -74,7 +76,10 @@ def score(out: Path, truth: dict, result) -> dict:
     right = [f for f in found if expected.get((f[0], f[1])) == f[2]]
     scored_found = [f for f in found if f[1] in SCORED]
     false_alarms = [f for f in scored_found if (f[0], f[1]) not in expected]
-    tests = sum(max(0, sum(1 for v in truth.values() if v["car"] == c) - 1) for c in {v["car"] for v in truth.values()})
+    tests = sum(
+        max(0, sum(1 for v in truth.values() if v["car"] == c) - 1)
+        for c in {v["car"] for v in truth.values()}
+    )
     seconds = [r["seconds"] for r in result.records]
     by_method: dict[str, list[float]] = {}
     for r in result.records:
@@ -123,7 +128,10 @@ def real(folder: Path, workers: int, answered: Path | None = None) -> dict:
     from vdsbi import api
 
     drives = sorted(folder.glob("*/recording.csv"))
-    rows = [{"car": d.parent.name, "recording": str(d), "vehicle": str(d.parent / "vehicle.json"), "time": 0} for d in drives]
+    rows = [
+        {"car": d.parent.name, "recording": str(d), "vehicle": str(d.parent / "vehicle.json"), "time": 0}
+        for d in drives
+    ]
     with tempfile.TemporaryDirectory() as tmp:
         manifest = Path(tmp) / "manifest.csv"
         pd.DataFrame(rows).to_csv(manifest, index=False)
@@ -141,7 +149,11 @@ def real(folder: Path, workers: int, answered: Path | None = None) -> dict:
             if r["car"] not in {x["car"] for x in rows}:
                 continue
             if not r.get("parameters"):
-                out[r["car"]] = {"method": r["method"], "error": r.get("error"), "fleet_seconds": r["seconds"]}
+                out[r["car"]] = {
+                    "method": r["method"],
+                    "error": r.get("error"),
+                    "fleet_seconds": r["seconds"],
+                }
                 continue
             row = next(x for x in rows if x["car"] == r["car"])
             effects = platforms.get(r.get("platform"))  # None: identify's own defaults, as the fleet's
@@ -180,7 +192,9 @@ def real_markdown(s: dict) -> str:
         ]
         for name, p in r["parameters"].items():
             f, i = p["fleet"], p["identify"]
-            lines.append(f"| {name} | {f[0]:.4g} / {f[1]:.4g} / {f[2]:.4g} ({f[3]}) | {i[0]:.4g} / {i[1]:.4g} / {i[2]:.4g} ({i[3]}) |")
+            lines.append(
+                f"| {name} | {f[0]:.4g} / {f[1]:.4g} / {f[2]:.4g} ({f[3]}) | {i[0]:.4g} / {i[1]:.4g} / {i[2]:.4g} ({i[3]}) |"
+            )
         lines.append("")
     return "\n".join(lines)
 
@@ -188,7 +202,9 @@ def real_markdown(s: dict) -> str:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--answered", default=None, help="with --real: a fleet output to read the answers from")
-    ap.add_argument("--real", nargs="?", const=str(Path(__file__).resolve().parents[2] / "shared" / "real"), default=None)
+    ap.add_argument(
+        "--real", nargs="?", const=str(Path(__file__).resolve().parents[2] / "shared" / "real"), default=None
+    )
     ap.add_argument("--quick", action="store_true", help="3 cars × 3 drives, a small estimator")
     ap.add_argument("--cars", type=int, default=6)
     ap.add_argument("--drives", type=int, default=4)
@@ -209,7 +225,9 @@ def main(argv=None) -> dict:
     settings = quick_settings() if args.quick else FleetSettings(seed=args.seed)
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(args.out or tmp)
-        manifest = simulated_fleet(root / "fleet", cars=args.cars, drives=args.drives, duration=args.duration, seed=args.seed)
+        manifest = simulated_fleet(
+            root / "fleet", cars=args.cars, drives=args.drives, duration=args.duration, seed=args.seed
+        )
         truth = json.loads((root / "fleet" / "truth.json").read_text())
         start = time.perf_counter()
         result = fleet(manifest, root / "out", settings, Cluster(workers=args.workers), log=print)

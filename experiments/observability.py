@@ -96,6 +96,7 @@ def identification(key, model, inputs, v0, fisher, num_seeds, num_iters=12):
     eps = jax.random.normal(key, (num_seeds, *mu.shape))
     xs = mu + fisher.std * eps
     z0 = jnp.ones(6)  # Table I nominal in scaled units (the truth is 0.87–1.45 of it)
+
     def one(x):
         fn = lambda z: ((mean(z) - x) / fisher.std).reshape(-1)
         sol = levenberg_marquardt(fn, z0, max_steps=num_iters, rtol=0.0, damping=1e-3)

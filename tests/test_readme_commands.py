@@ -81,7 +81,7 @@ def test_a_readme_command_reaches_the_library_call(command, tmp_path, monkeypatc
     argv = shlex.split(command)[1:]
     with pytest.raises(_Reached):
         main(argv)
-    (name, _, kwargs), = calls
+    ((name, _, kwargs),) = calls
     assert name == argv[0]
     if "--prior" in argv:
         for item in (argv[i + 1] for i, a in enumerate(argv) if a == "--prior"):

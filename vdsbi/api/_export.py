@@ -268,9 +268,7 @@ def _other_notes(params: Mapping[str, Any]) -> list[str]:
     return lines
 
 
-def identified_status(
-    p: Mapping[str, Any], yes: str = "identified", no: str = "NOT identified alone"
-) -> str:
+def identified_status(p: Mapping[str, Any], yes: str = "identified", no: str = "NOT identified alone") -> str:
     """Whether the drive identifies a parameter alone, and why not (`yes` and `no` the words)."""
     if p.get("identified") is False:
         why = p.get("not_identified_because")

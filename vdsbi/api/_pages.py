@@ -7,6 +7,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from scipy.stats import binom
+
 from ..simulator import PARAM_UNITS
 from . import _html as H
 from ._export import identified_status
@@ -282,6 +284,7 @@ def demo_page(
                 ["parameter", "unit", "truth"] + [f"{label}: estimate [90 %]" for label in labels],
                 _truth_rows(truth, runs),
             ),
+            *(H.paragraph(line) for line in _interval_tally(truth, runs)),
             H.heading("Held-out driving: χ²/dof of each estimate (1: the sensor-noise level)"),
             H.table(["channel", *labels], held),
             H.figure(
@@ -341,6 +344,29 @@ def _truth_rows(truth: Mapping[str, float], runs) -> list[list[str]]:
             row.append("not in the model" if p is None else _with_interval(p, truth.get(n)))
         rows.append(row)
     return rows
+
+
+def _interval_tally(truth: Mapping[str, float], runs) -> list[str]:
+    """Per run, how many truths fall outside their 90 % intervals against what chance gives: a
+    tenth of them, and k or more misses in P(≥ k) of drives (binomial)."""
+    lines = []
+    for label, _, summ in runs:
+        scored = [
+            (n, p)
+            for n, p in summ["parameters"].items()
+            if p.get("identified") is not False and truth.get(n) is not None
+        ]
+        missed = [n for n, p in scored if not p["q05"] <= truth[n] <= p["q95"]]
+        if not scored:
+            continue
+        chance = binom.sf(len(missed) - 1, len(scored), 0.1) if missed else 1.0
+        lines.append(
+            f"{label}: {len(missed)} of {len(scored)} truths outside their 90 % intervals"
+            + (f" ({', '.join(missed)})" if missed else "")
+            + f"; intervals that hold 90 % leave {0.1 * len(scored):.1f} out on average, and "
+            f"{len(missed)} or more on {chance:.0%} of drives."
+        )
+    return lines
 
 
 def _with_interval(p: Mapping[str, Any], truth: float | None) -> str:

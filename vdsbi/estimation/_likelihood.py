@@ -28,8 +28,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.stats import norm
 from jaxtyping import Array, Float, PRNGKeyArray
+from scipy.stats import norm
 
 from ..problem import Box, Problem, parameter_names, simulate_draws, windowed_model
 from ..simulator import PARAM_NAMES, AbstractVehicleModel, Solver
@@ -254,7 +254,9 @@ def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, wid
     raw = np.asarray(res.jacobian).reshape(*mask.shape, len(scale), kw + n_v)
     raw = np.concatenate([raw[..., :k], raw[..., kw:]], axis=-1)
     jac = raw * (std / scale)[:, None]
-    cov_free, informed, shifts, joint, curvature = _covariances(data, mask, jac, resid / scale, z - mean[idx], tau)
+    cov_free, informed, shifts, joint, curvature = _covariances(
+        data, mask, jac, resid / scale, z - mean[idx], tau
+    )
     cov, cov_info = (np.diag(np.full(len(names), PRIOR_Z_STD**2)) for _ in range(2))
     cov[np.ix_(idx, idx)] = cov_free
     cov_info[np.ix_(idx, idx)] = informed
@@ -314,7 +316,9 @@ def prior_mean(box: Box, effects: Sequence) -> np.ndarray:
     floor, a range a diagnosis measured): the least effect the box allows. A parameter the drive
     does not inform then stays where the car most likely is, not at the middle of what any car
     could have."""
-    starts = np.concatenate([np.full(len(PARAM_NAMES), np.nan), *[np.asarray(e.start, float) for e in effects]])
+    starts = np.concatenate(
+        [np.full(len(PARAM_NAMES), np.nan), *[np.asarray(e.start, float) for e in effects]]
+    )
     if len(starts) != len(box.names):
         raise ValueError(f"{len(starts)} starts for a box over {len(box.names)} parameters")
     u = (starts - np.asarray(box.low, float)) / np.asarray(box.width, float)

@@ -99,7 +99,10 @@ def _cost_function(posterior: LikelihoodPosterior, problem: Problem, effects, id
         th, ep = split_parameters(theta, effects)
         pred, ok = simulate_draws(None, wm, th, effect_params=ep)
         r2 = np.where(mask[..., None], (np.asarray(pred, float) - data.y) ** 2, 0.0)
-        c = 0.5 * np.sum(r2 * weight, axis=(1, 2, 3)) + 0.5 * np.sum((z[:, idx] - mean) ** 2, 1) / PRIOR_Z_STD**2
+        c = (
+            0.5 * np.sum(r2 * weight, axis=(1, 2, 3))
+            + 0.5 * np.sum((z[:, idx] - mean) ** 2, 1) / PRIOR_Z_STD**2
+        )
         return np.where(np.asarray(ok), np.nan_to_num(c, nan=np.inf), np.inf)
 
     return cost
