@@ -51,7 +51,7 @@ from tasks import get_task  # noqa: E402
 
 from vdsbi.diagnostics import c2st  # noqa: E402
 from vdsbi.inference import IdentityEmbedding, NPEConfig, TrainingSettings, apt  # noqa: E402
-from vdsbi.simulator import release_compiled_programs  # noqa: E402
+from vdsbi.runtime import release_compiled_programs  # noqa: E402
 
 PUBLISHED = {  # sbibm (Lueckmann et al. 2021), mean C2ST over 10 observations, sbi + NSF
     ("two_moons", "npe"): (0.725, 0.606, 0.542),

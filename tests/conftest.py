@@ -80,8 +80,8 @@ __all__ = ["tree_allclose", "jnp"]
 def _under_the_memory_map_limit():
     """One pytest worker compiles hundreds of programs; without this it reached Linux's
     `vm.max_map_count` after ~275 tests and died in XLA's compiler (see
-    `vdsbi.simulator.release_compiled_programs`)."""
+    `vdsbi.runtime.release_compiled_programs`)."""
     yield
-    from vdsbi.simulator import release_compiled_programs
+    from vdsbi.runtime import release_compiled_programs
 
     release_compiled_programs()

@@ -16,6 +16,7 @@ ROOT = Path(__file__).resolve().parents[1] / "vdsbi"
 
 #: Rank of each package: a package may import packages of equal or lower rank only.
 LAYERS: dict[str, int] = {
+    "runtime": 0,
     "simulator": 0,
     "io": 1,
     "problem": 2,

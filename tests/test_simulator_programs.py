@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import pytest
 
-from vdsbi.simulator import memory_map_usage, release_compiled_programs
+from vdsbi.runtime import memory_map_usage, release_compiled_programs
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 

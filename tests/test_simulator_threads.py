@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vdsbi.simulator import in_background, thread_map
+from vdsbi.runtime import in_background, thread_map
 
 
 def test_thread_map_is_the_loop_in_its_order_with_the_callers_float64():

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ..io import output_dir
-from ..simulator import in_background
+from ..runtime import in_background
 from ._commands import measured_priors
 from ._diagnose import diagnose
 from ._identify import identify

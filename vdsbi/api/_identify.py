@@ -31,7 +31,7 @@ from ..problem import (
     predictive_band,
     prior_box,
 )
-from ..simulator import SpeedDriven, model_class, release_compiled_programs
+from ..simulator import SpeedDriven, model_class
 from ._extrapolation import held_out_extrapolation
 from ._identify_report import npe_check, ppc_summary, run_summary, run_warnings, validation_report
 from ._identify_result import IdentifyResult
@@ -120,7 +120,6 @@ def identify(
     import jax
 
     say = log or (lambda s: None)
-    release_compiled_programs()  # a process that identifies drive after drive stays under the limit
     recs, veh = _load(recording, vehicle, rate)
     settings = _settings(rounds, sims, embedding, epochs, num_samples)
     prob = _problem(recs, veh, longitudinal, segment, max_duration, bandwidth, holdout)

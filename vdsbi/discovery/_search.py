@@ -23,7 +23,8 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
-from ..simulator import EFFECTS, release_compiled_programs, thread_map
+from ..runtime import thread_map
+from ..simulator import EFFECTS
 from ._candidates import label
 from ._rank import STRONG, bic_score
 from ._results import DiscoveryFit
@@ -56,7 +57,6 @@ def _ordered(effects, names: Sequence[str]) -> tuple[str, ...]:
 def _step(current, names, fits, fit_fn, workers: int) -> Step:
     tried = {e: _ordered(current + (e,), names) for e in names if e not in current}
     todo = [c for c in tried.values() if c not in fits]
-    release_compiled_programs()  # a process that has compiled many programs stays under the limit
     z0 = fits[current].z
     fits.update(zip(todo, thread_map(lambda cand: fit_fn(cand, z0), todo, workers)))
     gains = {e: float(bic_score(fits[cand], fits[current])) for e, cand in tried.items()}

@@ -29,6 +29,7 @@ import numpy as np
 
 from ..estimation import PRIOR_Z_STD, ModelError, fit_likelihood
 from ..io import InputError, write_text_atomically
+from ..runtime import release_compiled_programs
 from ._amortized import PlatformEstimator, Proposal, drive_proposal
 from ._check import CheckResult, importance_check, k_threshold, weighted_summary
 from ._manifest import Drive
@@ -85,6 +86,8 @@ def answer_drive(
     """Answer `drive` and write its result.json (atomically; the record returned). `prepared` is
     the platform, its estimator's folder and why there is none. Bad input is a failed record,
     never an exception: one drive's fault does not stop the fleet."""
+    # A worker answers drive after drive in one process: it stays under the memory-map limit.
+    release_compiled_programs()
     folder = drive_folder(out, drive)
     folder.mkdir(parents=True, exist_ok=True)
     attempt = _mark_running(folder)

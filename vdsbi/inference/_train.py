@@ -11,7 +11,7 @@ import numpy as np
 import optax
 from jaxtyping import PRNGKeyArray
 
-from ..simulator import in_background
+from ..runtime import in_background
 from ._config import TrainingSettings
 from ._estimator import AbstractEstimator
 from ._loss import AbstractLoss

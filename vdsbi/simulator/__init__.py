@@ -27,12 +27,6 @@ from ._profiles import (
     random_profile as random_profile,
     seed_profile as seed_profile,
 )
-from ._programs import (
-    in_background as in_background,
-    memory_map_usage as memory_map_usage,
-    release_compiled_programs as release_compiled_programs,
-    thread_map as thread_map,
-)
 from ._sensors import (
     SEED_RELATIVE_NOISE as SEED_RELATIVE_NOISE,
     SensorNoise as SensorNoise,
