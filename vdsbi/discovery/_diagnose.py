@@ -385,12 +385,14 @@ def _find(windows: Problem, vehicle: Vehicle, s: DiagnoseSettings, names: tuple[
     coarse, fitter = _fitters(windows, s, start)
     fitted = fitter.problem
     base_c, base = _fit_base(coarse, fitter, vehicle, start, s, say)
-    in_background(fitter.predict, base.z, start, windows)  # the held-out comparison's, during the search
+    # The held-out comparison's programs compile during the search.
+    predicting = in_background(fitter.predict, base.z, start, windows)
     before = _check(base, fitted, s.seed, s)
     loc, detected = _locate(before, fitted, s, say)
     search = _search(coarse, base_c, names, s, say)
     decision = _decide(search, fitter, base, detected, s, say)
     after = _check(decision.final, fitted, s.seed + 1, s)
+    predicting.result()  # compiled (or raised) before the comparison calls it
     predictions, variances, held = _held_out(fitter, windows, {"before": base, "after": decision.final})
     worst = worst_channel(held["after"])
     held_ok = not detected or worst[1] <= claim_limit(worst[2])

@@ -5,9 +5,9 @@ Step 1 fits every effect alone on the base fit. If the best has strong evidence 
 factor ≥ `STRONG`), each later step fits every remaining effect added to the current set
 (warm-started from the current set's fit, so θ and the effects already in re-fit jointly) and
 keeps the one with the largest evidence gain over the current set, if that gain is strong too;
-up to `max_effects` effects. The gain is the BIC log Bayes factor of the larger set against the
-current one, so a strong effect no longer hides a weak one (pairs among the top singles did:
-the weak effect may rank low alone while the strong one's misfit dominates).
+up to `max_effects` effects. The gain is the log Bayes factor of the larger set against the
+current one (`bic_score`), so a strong effect does not hide a weak one (alone, the weak effect
+may rank low while the strong one's misfit dominates).
 
 After each addition, each earlier member is tried out again (a backward step): one that no
 longer adds strong evidence beside the others is removed — an effect that entered first as a

@@ -272,10 +272,9 @@ def _round_patience(
 
     A flow carried over from a previous round that stopped early has already fitted the older
     draws; how many updates it needs to take in a round's new draws scales with their number,
-    not with all the data, so waiting ``patience`` epochs over everything made late rounds pay
-    mostly for waiting (APT at 10⁴: best epoch 0–12, then 20 epochs over up to 9000 examples).
-    A previous round cut off by ``max_epochs`` had not converged: full patience then (scaling
-    it anyway, two_moons 2 × 1500 at 40 epochs scored C2ST 0.72 instead of 0.66).
+    not with all the data: waiting ``patience`` epochs over everything would make late rounds
+    pay mostly for waiting. A previous round cut off by ``max_epochs`` had not converged: full
+    patience then.
     """
     # a decaying schedule that ran its course ended on small steps: converged by design
     ran_out = previous is not None and previous["epochs"] >= previous.get("max_epochs", training.max_epochs)

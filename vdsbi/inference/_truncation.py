@@ -2,12 +2,12 @@
 
 Rejection from the whole prior box keeps a share equal to the region's prior mass, which falls
 as (posterior width / prior width)^d: about 1.4e-5 for a 10-d posterior a tenth of the box
-wide, where 2·10⁶ candidates gave ~30 of 1000 draws. The rest used to be posterior draws, and
-maximum likelihood on posterior draws learns the posterior times the proposal: too narrow.
-Candidates therefore come from an ellipsoid around the region whenever it is smaller than the
-box: drawn uniformly in it and kept when inside the box and the region, they are exactly the
-truncated (uniform) prior as long as the ellipsoid holds the region, which is checked: the
-ellipsoid grows while kept draws reach its outer shell.
+wide. Filling a round with posterior draws instead would not do: maximum likelihood on posterior
+draws learns the posterior times the proposal, too narrow. Candidates therefore come from an
+ellipsoid around the region whenever it is smaller than the box: drawn uniformly in it and kept
+when inside the box and the region, they are exactly the truncated (uniform) prior as long as
+the ellipsoid holds the region, which is checked: the ellipsoid grows while kept draws reach its
+outer shell.
 """
 
 import dataclasses

@@ -131,8 +131,8 @@ BATCH_BYTES = 4 * 2**30
 
 
 def _bytes_per_draw(wm: WindowedModel) -> int:
-    # W·T readings of 6 states in float32, about four live copies of them (measured: a 60-window
-    # drive's 1000 draws peaked at 10 GB).
+    # W·T readings of 6 states in float32, about four live copies of them (the readings, the
+    # noise, the filter's input and output).
     return 4 * 6 * 4 * int(wm.inputs.steer.size)
 
 
