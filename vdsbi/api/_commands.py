@@ -7,13 +7,15 @@ import shlex
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+from ..simulator import LongitudinalChoice
+
 
 def shown(path: str | os.PathLike | None, default: str) -> str:
     """`path` as the user gave it (quoted for a shell), or `default` when there is none."""
     return default if path is None else shlex.quote(str(path))
 
 
-def diagnose_command(recording, vehicle, out, longitudinal: str = "auto") -> str:
+def diagnose_command(recording, vehicle, out, longitudinal: LongitudinalChoice = "auto") -> str:
     """`vdsbi diagnose REC --vehicle V --out OUT` (OUT: `diagnose` beside the identify folder)."""
     target = "diagnose" if out is None else str(Path(out).parent / "diagnose")
     cmd = (
@@ -28,7 +30,7 @@ def identify_command(
     vehicle,
     out,
     effects: Sequence[str],
-    longitudinal: str = "auto",
+    longitudinal: LongitudinalChoice = "auto",
     priors: Mapping[str, tuple[float, float]] | None = None,
     *,
     base: Sequence[str] = (),

@@ -26,7 +26,7 @@ import os
 import re
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from ..io import InputError
 from ._held_out import HeldOutVerdict, held_out_verdict
@@ -63,8 +63,12 @@ def corner_masses(mass: float, wheelbase: float, l_f: float) -> dict[str, float]
     }
 
 
+#: The controller files `export` writes.
+ExportFormat = Literal["autoware", "json", "csv"]
+
+
 def export(
-    run_dir: str | os.PathLike, fmt: str = "autoware", vehicle: Mapping[str, Any] | None = None
+    run_dir: str | os.PathLike, fmt: ExportFormat = "autoware", vehicle: Mapping[str, Any] | None = None
 ) -> str:
     """The text of `run_dir`'s result in format `fmt` (estimates; intervals in comments or
     columns).

@@ -7,7 +7,7 @@ import html
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 STYLE = """
 body { font-family: sans-serif; max-width: 1150px; margin: 2em auto; color: #222; }
@@ -32,7 +32,7 @@ def heading(text: str, level: int = 2) -> str:
     return f"<h{level}>{esc(text)}</h{level}>"
 
 
-def paragraph(text: str, kind: str | None = None) -> str:
+def paragraph(text: str, kind: Literal["ok", "warn"] | None = None) -> str:
     """A paragraph (escaped); `kind` "warn" or "ok" draws it as a coloured note."""
     return f'<p class="{kind}">{esc(text)}</p>' if kind else f"<p>{esc(text)}</p>"
 

@@ -31,7 +31,7 @@ from ..problem import (
     predictive_band,
     prior_box,
 )
-from ..simulator import SpeedDriven, model_class
+from ..simulator import LongitudinalChoice, SpeedDriven, model_class
 from ._extrapolation import held_out_extrapolation
 from ._identify_report import npe_check, ppc_summary, run_summary, run_warnings, validation_report
 from ._identify_result import IdentifyResult
@@ -59,7 +59,7 @@ def identify(
     num_samples: int = 1000,
     segment: tuple[float, float] | None = None,
     max_duration: float | None = None,
-    longitudinal: str = "auto",
+    longitudinal: LongitudinalChoice = "auto",
     bandwidth: float | str | None = "auto",
     effects: Sequence[str] | None = None,
     add_effects: Sequence[str] = (),
@@ -240,7 +240,9 @@ def _settings(rounds, sims, embedding, epochs, num_samples):
     )
 
 
-def _problem(recs, veh, longitudinal: str, segment, max_duration, bandwidth, holdout: float) -> Problem:
+def _problem(
+    recs, veh, longitudinal: LongitudinalChoice, segment, max_duration, bandwidth, holdout: float
+) -> Problem:
     """The drives as one `Problem`: 20-s windows with torques, 10-s windows following the speed."""
     if max_duration is not None and max_duration <= 0:
         raise InputError("settings", "--max-duration", "must be > 0")

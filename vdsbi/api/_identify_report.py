@@ -23,6 +23,7 @@ from ..problem import (
     split_parameters,
     validate,
 )
+from ..simulator import LongitudinalChoice
 from ._commands import diagnose_command
 from ._trust import model_error_warning, trust_warnings
 from .outputs import summarise
@@ -202,7 +203,7 @@ def validation_report(prob: Problem, checked, npe_samples: np.ndarray, effects, 
 
 
 def run_warnings(
-    samples: np.ndarray, summary: dict, box: Box, names, longitudinal: str
+    samples: np.ndarray, summary: dict, box: Box, names, longitudinal: LongitudinalChoice
 ) -> list[dict[str, Any]]:
     """posterior.json's `warnings`: mass piled at the prior's edges, or a predictive band that
     misses the recording, each pointing to `vdsbi diagnose`."""

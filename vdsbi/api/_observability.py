@@ -12,7 +12,7 @@ from typing import Any
 
 from ..io import InputError, Recording
 from ..problem import make_problem
-from ..simulator import CHANNELS, SEED_CHANNELS, Inputs, Vehicle
+from ..simulator import CHANNELS, SEED_CHANNELS, Inputs, LongitudinalMode, Vehicle
 from ._validate import (
     PROFILE_V0,
     checked_theta,
@@ -157,7 +157,9 @@ def _report(model, theta, inputs, v0, params, channels, noise, vehicle: Vehicle,
     return rep
 
 
-def _model(vehicle: Vehicle, effects: Sequence[str], effect_params, longitudinal: str = "torque"):
+def _model(
+    vehicle: Vehicle, effects: Sequence[str], effect_params, longitudinal: LongitudinalMode = "torque"
+):
     """The model with `effects` enabled and the effects' parameter vectors."""
     from ..simulator import effect_params_from, make_model
 

@@ -14,6 +14,7 @@ from ..simulator import (
     CHANNELS,
     AbstractVehicleModel,
     Inputs,
+    LongitudinalChoice,
     SpeedDriven,
     TorqueDriven,
     Vehicle,
@@ -80,7 +81,7 @@ def simulate(
     effect_params: Mapping[str, Mapping[str, float]] | None = None,
     noise: str = "none",
     seed: int = 0,
-    longitudinal: str = "auto",
+    longitudinal: LongitudinalChoice = "auto",
 ) -> SimulateResult:
     """One simulation of `vehicle` (a Vehicle, a file, or None for the built-in one).
 

@@ -26,7 +26,16 @@ from jaxtyping import Array, Float
 
 from ..estimation import ModelError, SensorNoise, fit_likelihood
 from ..problem import Box, Problem, WindowedModel, windowed_model
-from ..simulator import EFFECTS, PARAM_NAMES, AbstractVehicleModel, Solver, Vehicle, make_model, model_class
+from ..simulator import (
+    EFFECTS,
+    PARAM_NAMES,
+    AbstractVehicleModel,
+    LongitudinalMode,
+    Solver,
+    Vehicle,
+    make_model,
+    model_class,
+)
 from ._candidates import EffectSpace, effect_space
 from ._results import DiscoveryFit
 
@@ -36,7 +45,9 @@ V0_PRIOR_STD = 1.0
 EDGE = 1e-9
 
 
-def super_model(vehicle: Vehicle, effects: EffectSpace, longitudinal: str = "torque") -> AbstractVehicleModel:
+def super_model(
+    vehicle: Vehicle, effects: EffectSpace, longitudinal: LongitudinalMode = "torque"
+) -> AbstractVehicleModel:
     """All candidate effects, in registry order. At their null values they vanish exactly
     (the lags' states are frozen and bypassed at τ = 0, so nothing stiff remains and a 5 ms
     RK4 step is stable; τ is bounded below by 5 ms when fitted: |λ|·h ≤ 1.2)."""

@@ -4,7 +4,7 @@ and the whole diagnosis. Each is built once, complete, and not changed afterward
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -123,7 +123,7 @@ class Verdict:
     chosen: tuple[str, ...]
     explained: bool | None
     held_out_improved: bool | None
-    explanation: str
+    explanation: Literal["library", "discovered term", "unexplained", "none"]
     text: str
     dropped: tuple[str, ...] = ()
 

@@ -7,6 +7,7 @@ import functools
 import time
 from collections.abc import Callable, Sequence
 
+from ..simulator import LongitudinalChoice
 from ._candidates import effect_names
 
 
@@ -44,7 +45,7 @@ class DiagnoseSettings:
     max_effects: int = 3
     candidates: Sequence[str] | None = None
     base_effects: Sequence[str] | None = None
-    longitudinal: str = "auto"
+    longitudinal: LongitudinalChoice = "auto"
     max_window: float | None = None
     max_windows: int | None = None
     train_fraction: float = 0.7

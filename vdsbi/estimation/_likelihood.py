@@ -31,7 +31,7 @@ import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 from scipy.stats import norm
 
-from ..problem import Box, Problem, parameter_names, simulate_draws, windowed_model
+from ..problem import Box, Part, Problem, parameter_names, simulate_draws, windowed_model
 from ..simulator import PARAM_NAMES, AbstractVehicleModel, Solver
 from ._least_squares import laplace_covariance, levenberg_marquardt
 from ._noise import ModelError, NoiseModel, SensorNoise, measure_noise
@@ -88,7 +88,7 @@ class LikelihoodPosterior(eqx.Module):
     inconsistency: dict | None = None
     v0_offset: np.ndarray | None = None
     curvature: np.ndarray | None = None
-    part: str = eqx.field(static=True, default="train")
+    part: Part = eqx.field(static=True, default="train")
     residual: np.ndarray | None = None
     jacobian: np.ndarray | None = None
     prior_mean: np.ndarray | None = None
@@ -162,7 +162,7 @@ def fit_likelihood(
     effects: Sequence[str] = (),
     model: AbstractVehicleModel | None = None,
     free: Sequence[str] | None = None,
-    part: str = "train",
+    part: Part = "train",
     noise: SensorNoise | ModelError = ModelError(),
     max_steps: int = 40,
     solver: Solver = Solver(),

@@ -22,7 +22,7 @@ from ..problem import (
     parameter_names,
     prior_box,
 )
-from ..simulator import Vehicle
+from ..simulator import LongitudinalMode, Vehicle
 
 #: Longest window of a fleet drive, s: identify's for drives that follow the measured speed.
 MAX_WINDOW = 10.0
@@ -62,7 +62,7 @@ class Platform:
 
     vehicle_file: Path
     vehicle: Vehicle
-    longitudinal: str
+    longitudinal: LongitudinalMode
     channels: tuple[str, ...]
     effects: tuple[str, ...]
     low: tuple[float, ...]

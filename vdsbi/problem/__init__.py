@@ -28,6 +28,7 @@ from ._parameters import (
 )
 from ._problem import (
     LONGITUDINAL_MODES as LONGITUDINAL_MODES,
+    Part as Part,
     Problem as Problem,
     ProblemSettings as ProblemSettings,
     compared_speed as compared_speed,

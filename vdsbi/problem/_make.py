@@ -18,6 +18,8 @@ from ..simulator import (
     LONGITUDINAL_MODES,
     AbstractVehicleModel,
     Decimator,
+    LongitudinalChoice,
+    LongitudinalMode,
     SpeedDriven,
     TorqueDriven,
     Vehicle,
@@ -42,7 +44,7 @@ SPEED_MODE_INPUT_CHANNELS = ("ax", "vx", "omega_front", "omega_rear")
 V0_AVERAGE = 0.05
 
 
-def longitudinal_mode(rec: Recording, longitudinal: str = "auto") -> str:
+def longitudinal_mode(rec: Recording, longitudinal: LongitudinalChoice = "auto") -> LongitudinalMode:
     """ "torque" or "speed" for `rec`: "auto" is torque when it has torque columns.
 
     Raises:
@@ -51,7 +53,7 @@ def longitudinal_mode(rec: Recording, longitudinal: str = "auto") -> str:
     return _longitudinal_model(rec, longitudinal).longitudinal
 
 
-def _longitudinal_model(rec: Recording, longitudinal: str) -> type[AbstractVehicleModel]:
+def _longitudinal_model(rec: Recording, longitudinal: LongitudinalChoice) -> type[AbstractVehicleModel]:
     """`TorqueDriven` or `SpeedDriven` for `rec` and a user's setting (`longitudinal_mode`)."""
     if longitudinal not in (*LONGITUDINAL_MODES, "auto"):
         raise InputError("settings", "--longitudinal", f"must be auto, torque or speed, got {longitudinal!r}")

@@ -10,6 +10,7 @@ read off a `Problem`: its speed, the grip it uses and the yaw rate at a logged s
 from __future__ import annotations
 
 import dataclasses
+from typing import Literal
 
 import jax
 import jax.numpy as jnp
@@ -21,10 +22,15 @@ from ..simulator import (
     LONGITUDINAL_MODES,
     Decimator,
     Inputs,
+    LongitudinalChoice,
+    LongitudinalMode,
     Vehicle,
     model_class,
 )
 from ._windows import Window
+
+#: A problem's samples: the fitted ones, the held-out ones, or every usable one.
+Part = Literal["train", "held", "valid"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,7 +60,7 @@ class ProblemSettings:
             a stated reason (`slides`); False keeps them.
     """
 
-    longitudinal: str = "auto"
+    longitudinal: LongitudinalChoice = "auto"
     max_window: float = 20.0
     held_out: float = 0.3
     min_windows_to_split: int = 3
@@ -109,7 +115,7 @@ class Problem:
 
     source: str
     vehicle: Vehicle
-    longitudinal: str
+    longitudinal: LongitudinalMode
     channels: tuple[str, ...]
     windows: tuple[Window, ...]
     dt: float
@@ -144,13 +150,13 @@ class Problem:
         """`TorqueDriven` or `SpeedDriven`: the simulator model `longitudinal` names."""
         return model_class(self.longitudinal)
 
-    def part(self, name: str) -> np.ndarray:
+    def part(self, name: Part) -> np.ndarray:
         """The (W, K) mask of "train", "held" or "valid" samples."""
         if name not in ("train", "held", "valid"):
             raise ValueError(f"part must be 'train', 'held' or 'valid', got {name!r}")
         return getattr(self, name)
 
-    def select(self, name: str) -> Problem:
+    def select(self, name: Part) -> Problem:
         """The windows holding any `name` samples, truncated after the last one.
 
         The simulation need not run past the last compared sample, so a "train" selection of a

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from typing import Literal
 
 import numpy as np
 
@@ -24,7 +25,7 @@ class Window:
 
     t0: float
     t1: float
-    role: str
+    role: Literal["train", "held"]
     split: float | None = None
 
     @property

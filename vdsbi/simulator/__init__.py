@@ -2,6 +2,8 @@
 
 from ._dynamics import (
     LONGITUDINAL_MODES as LONGITUDINAL_MODES,
+    LongitudinalChoice as LongitudinalChoice,
+    LongitudinalMode as LongitudinalMode,
     SpeedDriven as SpeedDriven,
     TorqueDriven as TorqueDriven,
     VehicleModel as VehicleModel,

@@ -20,7 +20,7 @@ Two longitudinal models, final classes under `AbstractVehicleModel`:
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import equinox as eqx
 import jax
@@ -217,9 +217,13 @@ class SpeedDriven(AbstractVehicleModel):
 #: The longitudinal models by their name at the public boundary (command lines, reports).
 MODELS: dict[str, type[AbstractVehicleModel]] = {m.longitudinal: m for m in (TorqueDriven, SpeedDriven)}
 LONGITUDINAL_MODES: tuple[str, ...] = tuple(MODELS)
+#: How the longitudinal motion is driven: by the wheel torques, or following the measured speed.
+LongitudinalMode = Literal["torque", "speed"]
+#: A user's choice of it: "auto" takes torques where the recording has them.
+LongitudinalChoice = Literal["auto", "torque", "speed"]
 
 
-def model_class(longitudinal: str | type[AbstractVehicleModel]) -> type[AbstractVehicleModel]:
+def model_class(longitudinal: LongitudinalMode | type[AbstractVehicleModel]) -> type[AbstractVehicleModel]:
     """The model class for a mode's name ("torque", "speed"), or the class itself.
 
     Raises:
@@ -233,7 +237,7 @@ def model_class(longitudinal: str | type[AbstractVehicleModel]) -> type[Abstract
 
 
 def VehicleModel(
-    vehicle: Vehicle, effects: tuple[AbstractEffect, ...] = (), longitudinal: str = "torque"
+    vehicle: Vehicle, effects: tuple[AbstractEffect, ...] = (), longitudinal: LongitudinalMode = "torque"
 ) -> AbstractVehicleModel:
     """The model for effect modules and a mode's name: `TorqueDriven` or `SpeedDriven`."""
     return model_class(longitudinal)(vehicle=vehicle, effects=effects)

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from ._dynamics import AbstractVehicleModel, Args, SpeedDriven, model_class
+from ._dynamics import AbstractVehicleModel, Args, LongitudinalMode, SpeedDriven, model_class
 from ._effects import EFFECTS, get_effect
 from ._inputs import Inputs
 from ._sharding import shard_draws
@@ -70,7 +70,9 @@ def theta_valid(theta, vehicle: Vehicle) -> Bool[Array, ""]:
     return (theta[0] > 0) & (theta[0] < vehicle.wheelbase) & jnp.all(theta[1:] > 0)
 
 
-def check_inputs(inputs: Inputs, longitudinal: str | type[AbstractVehicleModel] = "torque") -> None:
+def check_inputs(
+    inputs: Inputs, longitudinal: LongitudinalMode | type[AbstractVehicleModel] = "torque"
+) -> None:
     """Raise ValueError naming the series if an input the model uses is missing or non-finite.
 
     Args:
@@ -182,7 +184,7 @@ def solve_batch(
 def make_model(
     vehicle: Vehicle,
     effects: Sequence[str] = (),
-    longitudinal: str | type[AbstractVehicleModel] = "torque",
+    longitudinal: LongitudinalMode | type[AbstractVehicleModel] = "torque",
 ) -> AbstractVehicleModel:
     """Model with the named effects enabled.
 
@@ -216,7 +218,7 @@ def simulate(
     effects: Sequence[str] = (),
     effect_params: Mapping[str, object] | None = None,
     solver: AbstractSolver = RK4(),
-    longitudinal: str | type[AbstractVehicleModel] = "torque",
+    longitudinal: LongitudinalMode | type[AbstractVehicleModel] = "torque",
     lateral0=None,
 ) -> tuple[np.ndarray, bool]:
     """One noise-free simulation with every input checked first (the user-facing call).

@@ -13,7 +13,7 @@ The library is deliberately not registered in `EFFECTS`: it is searched by spars
 when the named effects leave a mismatch (`vdsbi.discovery`), not one effect at a time.
 """
 
-from typing import NamedTuple
+from typing import Literal, NamedTuple
 
 import jax.numpy as jnp
 
@@ -23,11 +23,17 @@ from ._base import AbstractEffect
 RATE_FILTER_TAU = 0.02
 
 
+#: Where a term acts: an input, a force or moment on the body, or a sensor reading.
+Target = Literal[
+    "steer", "torque_front", "torque_rear", "force_x", "force_y", "moment_z", "ax", "ay", "yaw_rate"
+]
+
+
 class Term(NamedTuple):
     """One candidate: `target` is where c·f enters, `feature` the formula of f, `unit` c's unit,
     `bound` the largest |c| fitted."""
 
-    target: str  # steer | torque_front | torque_rear | force_x | force_y | moment_z | ax | ay | yaw_rate
+    target: Target
     feature: str
     unit: str
     bound: float
