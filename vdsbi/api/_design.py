@@ -15,7 +15,7 @@ import numpy as np
 
 from ..io import InputError, Recording
 from ..simulator import CHANNELS, PARAM_NAMES, SEED_CHANNELS, Vehicle
-from ._validate import PROFILE_V0, checked_theta, load_vehicle, noise_channels, sensor_noise
+from ._validate import PROFILE_V0, NoiseName, checked_theta, load_vehicle, noise_channels, sensor_noise
 
 
 @dataclasses.dataclass
@@ -80,7 +80,7 @@ def design(
     *,
     target: str = "C_kappa_r",
     theta: Mapping[str, float] | Sequence[float] | None = None,
-    noise: str = "seed",
+    noise: NoiseName = "seed",
     steps: int = 150,
     learning_rate: float = 0.05,
     duration: float = 5.0,

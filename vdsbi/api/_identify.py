@@ -9,7 +9,7 @@ import json
 import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -60,7 +60,7 @@ def identify(
     segment: tuple[float, float] | None = None,
     max_duration: float | None = None,
     longitudinal: LongitudinalChoice = "auto",
-    bandwidth: float | str | None = "auto",
+    bandwidth: float | Literal["auto"] | None = "auto",
     effects: Sequence[str] | None = None,
     add_effects: Sequence[str] = (),
     priors: Mapping[str, tuple[float, float]] | None = None,

@@ -15,6 +15,7 @@ from ..problem import make_problem
 from ..simulator import CHANNELS, SEED_CHANNELS, Inputs, LongitudinalMode, Vehicle
 from ._validate import (
     PROFILE_V0,
+    NoiseName,
     checked_theta,
     checked_v0,
     first_speed,
@@ -62,7 +63,7 @@ def observability(
     theta: Mapping[str, float] | Sequence[float] | None = None,
     v0: float | None = None,
     channels: Sequence[str] | None = None,
-    noise: str = "seed",
+    noise: NoiseName = "seed",
     effects: Sequence[str] = (),
     effect_params: Mapping[str, Mapping[str, float]] | None = None,
     label: str | None = None,

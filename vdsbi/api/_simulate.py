@@ -20,7 +20,15 @@ from ..simulator import (
     Vehicle,
     model_class,
 )
-from ._validate import PROFILE_V0, checked_theta, checked_v0, first_speed, load_vehicle, sensor_noise
+from ._validate import (
+    PROFILE_V0,
+    NoiseName,
+    checked_theta,
+    checked_v0,
+    first_speed,
+    load_vehicle,
+    sensor_noise,
+)
 
 
 @dataclasses.dataclass
@@ -79,7 +87,7 @@ def simulate(
     v0: float | None = 10.0,
     effects: Sequence[str] = (),
     effect_params: Mapping[str, Mapping[str, float]] | None = None,
-    noise: str = "none",
+    noise: NoiseName = "none",
     seed: int = 0,
     longitudinal: LongitudinalChoice = "auto",
 ) -> SimulateResult:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Mapping, Sequence
+from typing import Literal
 
 import numpy as np
 
@@ -97,6 +98,8 @@ def first_speed(rec, vehicle: Vehicle) -> float:
 
 #: The sensor-noise names `simulate`, `observability` and `design` take, and the noise each
 #: makes from a vehicle file's noise_std (None: none).
+#: Sensor noise by name: none, the seed's relative noise, or the vehicle file's noise_std.
+NoiseName = Literal["none", "seed", "vehicle"]
 NOISE = {
     "none": lambda noise_std: None,
     "seed": lambda noise_std: SensorNoise.seed(),
@@ -104,7 +107,7 @@ NOISE = {
 }
 
 
-def sensor_noise(noise: str, vehicle: Vehicle, source: str) -> SensorNoise | None:
+def sensor_noise(noise: NoiseName, vehicle: Vehicle, source: str) -> SensorNoise | None:
     """The sensor noise `NOISE` names, for `vehicle`.
 
     Raises:

@@ -66,7 +66,7 @@ class ProblemSettings:
     min_windows_to_split: int = 3
     max_windows: int | None = None
     burn_in: float = 1.0
-    bandwidth: float | str | None = "auto"
+    bandwidth: float | Literal["auto"] | None = "auto"
     output_rate: float = 25.0
     segment: tuple[float, float] | None = None
     channels: tuple[str, ...] | None = None
