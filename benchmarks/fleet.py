@@ -93,9 +93,12 @@ def main(argv=None) -> dict:
         start = time.perf_counter()
         esc = settings.escalation
         effects = json.loads(next(platforms.glob("*/platform.json")).read_text())["platform"]["effects"]
-        api.identify(
-            drive, root / "fleet" / "vehicle.json", rounds=esc.rounds, sims=esc.sims, epochs=esc.epochs, holdout=0.0, effects=effects
+        options = api.IdentifyOptions(
+            drive=api.DriveOptions(holdout=0.0),
+            model=api.ModelOptions(effects=tuple(effects)),
+            budget=api.Budget(rounds=esc.rounds, sims=esc.sims, epochs=esc.epochs),
         )
+        api.identify(drive, root / "fleet" / "vehicle.json", options)
         identify_seconds = time.perf_counter() - start
     t_drive, startup = two["median_drive_seconds"], two["startup_seconds"]
     training = cold["training_seconds"] or 0.0

@@ -40,7 +40,8 @@ def main() -> None:
     for i, theta in enumerate(thetas):
         sim = api.simulate(theta, inputs, vehicle, v0=10.0, noise="vehicle", seed=i)
         rec = sim.to_recording(f"batch-{i}")
-        res = api.identify(rec, vehicle, rounds=args.rounds, sims=args.sims, seed=i)
+        budget = api.Budget(rounds=args.rounds, sims=args.sims)
+        res = api.identify(rec, vehicle, api.IdentifyOptions(budget=budget, seed=i))
         for name, t in zip(PARAM_NAMES, theta):
             p = res.summary["parameters"][name]
             rows.append((i, name, t, p["estimate"], p["std"], p["q05"] <= t <= p["q95"]))

@@ -46,7 +46,7 @@ KINDS = {
 SCORED = ("l_f", "C_alpha_f", "C_alpha_r")
 
 
-def one(i: int, kind: str, seed: int, duration: float, folder: Path, budget: dict) -> dict:
+def one(i: int, kind: str, seed: int, duration: float, folder: Path, budget: api.Budget) -> dict:
     effects, outside = KINDS[kind]
     case = folder / f"{kind}_{i}"
     concealed_effects.make_case(i, effects, seed, duration, case, kind=outside)
@@ -54,7 +54,8 @@ def one(i: int, kind: str, seed: int, duration: float, folder: Path, budget: dic
     rec = build_recording({"t": rec.t, "steer": rec.steer, **rec.channels}, f"{kind}_{i}")
     truth = json.loads((case / "truth.json").read_text())
     t0 = time.perf_counter()
-    res = api.identify(rec, veh, holdout=0.0, seed=seed, **budget)
+    options = api.IdentifyOptions(drive=api.DriveOptions(holdout=0.0), budget=budget, seed=seed)
+    res = api.identify(rec, veh, options)
     s = res.summary
     rows = {}
     for n in SCORED:
@@ -135,7 +136,7 @@ def main(argv=None) -> int:
     ap.add_argument("--merge", type=Path, nargs="*", default=None, help="tabulate rows written by shards")
     args = ap.parse_args(argv)
     per_kind, duration = (1, 12.0) if args.quick else (args.per_kind, args.duration)
-    budget = {"rounds": 1, "sims": 200, "epochs": 20, "num_samples": 2000}
+    budget = api.Budget(rounds=1, sims=200, epochs=20, num_samples=2000)
     rows = []
     if args.merge is not None:
         rows = [r for f in args.merge for r in json.loads(f.read_text())]

@@ -30,15 +30,16 @@ from vdsbi.api import demo_recording
 RESULTS = Path(__file__).parent / "results"
 
 
-def run_one(seed: int, duration: float, budget: dict, folder: Path) -> dict:
+def run_one(seed: int, duration: float, budget: api.Budget, folder: Path) -> dict:
     truth = demo_recording(folder, duration=duration, seed=seed)
     values = dict(truth["theta"])
     for effect, params in truth["concealed_effect"].items():
         values |= {f"{effect}.{k}": v for k, v in params.items()}
     t0 = time.perf_counter()
-    res = api.identify(
-        folder / "recording.csv", folder / "vehicle.json", add_effects=("sensor_bias",), seed=seed, **budget
+    options = api.IdentifyOptions(
+        model=api.ModelOptions(add_effects=("sensor_bias",)), budget=budget, seed=seed
     )
+    res = api.identify(folder / "recording.csv", folder / "vehicle.json", options)
     rows = {}
     for name, p in res.summary["parameters"].items():
         if p.get("identified") is False:
@@ -103,7 +104,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(RESULTS))
     args = ap.parse_args(argv)
     drives_n, duration = (2, 10.0) if args.quick else (args.drives, 20.0)
-    budget = {"rounds": 1, "sims": 200, "ppc_draws": 20, "num_samples": 500}
+    budget = api.Budget(rounds=1, sims=200, ppc_draws=20, num_samples=500)
     name = "demo_intervals_quick" if args.quick else "demo_intervals"
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -158,7 +158,14 @@ def real(folder: Path, workers: int, answered: Path | None = None) -> dict:
             row = next(x for x in rows if x["car"] == r["car"])
             effects = platforms.get(r.get("platform"))  # None: identify's own defaults, as the fleet's
             start = time.perf_counter()
-            alone = api.identify(row["recording"], row["vehicle"], effects=effects, holdout=0.0)
+            alone = api.identify(
+                row["recording"],
+                row["vehicle"],
+                api.IdentifyOptions(
+                    drive=api.DriveOptions(holdout=0.0),
+                    model=api.ModelOptions(effects=None if effects is None else tuple(effects)),
+                ),
+            )
             seconds = time.perf_counter() - start
             params = {}
             for name, p in r.get("parameters", {}).items():

@@ -171,11 +171,9 @@ def run_one(name: str, args, out: Path, true_delay: float | None = None) -> dict
     res = api.identify(
         first,
         veh,
-        rounds=args.rounds,
-        sims=args.sims,
-        seed=0,
+        api.IdentifyOptions(budget=api.Budget(rounds=args.rounds, sims=args.sims)),
         out_dir=out / name.split()[0] / str(rate),
-        log=print,
+        progress=api.Progress(say=print),
     )
     wall = time.perf_counter() - t0
     s = res.summary

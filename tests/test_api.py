@@ -61,7 +61,8 @@ def test_api_identify_turns_failed_simulations_into_one_line_and_cleans_up(monke
     monkeypatch.setattr(vdsbi.inference, "identify_problem", fail)
     out = tmp_path / "run"
     with pytest.raises(InputError, match="windows: almost every simulation of this drive failed"):
-        api.identify(GOOD / "recording.csv", GOOD / "vehicle.json", sims=10, out_dir=out)
+        options = api.IdentifyOptions(budget=api.Budget(sims=10))
+        api.identify(GOOD / "recording.csv", GOOD / "vehicle.json", options, out_dir=out)
     assert not out.exists()
 
 

@@ -34,7 +34,7 @@ def test_demo_runs_the_whole_loop_into_one_folder(tmp_path):
         sims=100,
         epochs=3,
         diagnose={"candidates": ("sensor_bias",), "max_effects": 1, "final_dt": 0.005, "num_draws": 100},
-        identify={"ppc_draws": 30},
+        ppc_draws=30,
     )
     out = tmp_path / "demo"
     res = api.demo(out, budget=budget)

@@ -200,16 +200,13 @@ def test_interrupted_run_resumes_to_identical_result(drive, full_run, tmp_path):
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
+        budget = api.Budget(rounds=2, sims=100, epochs=3, num_samples=200, embedding=StatisticsMLP())
         api.identify(
             rec,
             veh,
-            rounds=2,
-            sims=100,
-            epochs=3,
-            num_samples=200,
-            embedding=StatisticsMLP(),
+            api.IdentifyOptions(budget=budget),
             out_dir=out,
-            on_round_end=interrupt,
+            progress=api.Progress(say=lambda s: None, on_round_end=interrupt),
         )
     # Interrupted after round 1: only the checkpoint and the run settings are there.
     assert sorted(p.name for p in out.iterdir()) == [api.outputs.CHECKPOINT, api.outputs.RUN_FILE]

@@ -252,7 +252,13 @@ def test_the_table_and_the_page_name_the_pair_and_the_combinations(race_run):
     from vdsbi.api._pages import identify_page
 
     run, post = race_run
-    table = IdentifyResult(None, np.zeros((1, 6)), post).table()
+    result = IdentifyResult(None, np.zeros((1, 6)), post)
+    table = result.table()
+    # The typed fields say what the table prints.
+    assert result.estimate["C_alpha_r"] == pytest.approx(1.21e5)
+    assert result.identified["C_alpha_r"] is False and result.names[0] == "l_f"
+    lo, hi = result.interval["C_alpha_r"]
+    assert lo == post["parameters"]["C_alpha_r"]["q05"] and hi == post["parameters"]["C_alpha_r"]["q95"]
     row = next(r for r in table.splitlines() if r.startswith("C_alpha_r"))
     assert "1.21e+05" in row and "NOT identified alone" in row and "trades with l_f" in row
     assert "l_f and C_alpha_r trade along a ridge (ρ = +0.93)" in table

@@ -71,8 +71,8 @@ def drives(tmp_path_factory) -> dict[str, Path]:
 def run(drives, tmp_path_factory) -> Path:
     """identify on the fitted drive, on a tiny budget; its last 30 % (the harder end) held out."""
     out = tmp_path_factory.mktemp("runs") / "run"
-    budget = dict(rounds=1, sims=100, epochs=3, num_samples=200)
-    api.identify(drives["fit"], drives["vehicle"], out_dir=out, **budget)
+    budget = api.Budget(rounds=1, sims=100, epochs=3, num_samples=200)
+    api.identify(drives["fit"], drives["vehicle"], api.IdentifyOptions(budget=budget), out_dir=out)
     return out
 
 

@@ -81,9 +81,39 @@ def test_a_readme_command_reaches_the_library_call(command, tmp_path, monkeypatc
     argv = shlex.split(command)[1:]
     with pytest.raises(_Reached):
         main(argv)
-    ((name, _, kwargs),) = calls
+    ((name, args, kwargs),) = calls
     assert name == argv[0]
+    if name == "identify":
+        assert isinstance(args[2], api.IdentifyOptions)
     if "--prior" in argv:
+        priors = args[2].model.priors if name == "identify" else kwargs["priors"]
         for item in (argv[i + 1] for i, a in enumerate(argv) if a == "--prior"):
             param, rng = item.split("=")
-            assert kwargs["priors"][param] == tuple(float(v) for v in rng.split(":"))
+            assert priors[param] == tuple(float(v) for v in rng.split(":"))
+
+
+def readme_python() -> str:
+    """The README's Python block."""
+    text = (ROOT / "README.md").read_text()
+    return text.split("```python\n", 1)[1].split("```", 1)[0]
+
+
+def test_the_readme_python_example_runs_with_its_typed_options(tmp_path, monkeypatch):
+    seen = {}
+
+    class _Result:
+        def table(self):
+            return "table"
+
+    def identify(recording, vehicle, options, *, out_dir=None, progress=None):
+        seen["identify"] = (options, out_dir, progress)
+        return _Result()
+
+    monkeypatch.setattr(api, "identify", identify)
+    monkeypatch.setattr(api, "diagnose", lambda *a, **k: seen.setdefault("diagnose", a))
+    monkeypatch.setattr(api, "export", lambda *a, **k: seen.setdefault("export", a) and "{}")
+    exec(compile(readme_python(), "README.md", "exec"), {})
+    options, out_dir, progress = seen["identify"]
+    assert isinstance(options.drive, api.DriveOptions) and isinstance(options.budget, api.Budget)
+    assert options.model.add_effects == ("sensor_bias",) and isinstance(progress, api.Progress)
+    assert seen["diagnose"][2] == "diag/" and seen["export"] == ("run/", "json")

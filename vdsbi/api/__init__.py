@@ -6,7 +6,7 @@ parse their arguments, call these and print. `identify` with `out_dir` writes ex
 `vdsbi identify` writes.
 
     from vdsbi import api
-    res = api.identify("drive.csv", "vehicle.json", rounds=2, sims=1000, seed=0)
+    res = api.identify("drive.csv", "vehicle.json", api.IdentifyOptions(seed=0))
     print(res.table())
 
 What the commands write and draw is in `vdsbi.api.outputs` (the identify folder's files, the
@@ -29,6 +29,13 @@ from ._export import export as export
 from ._identify import identify as identify
 from ._identify_result import IdentifyResult as IdentifyResult
 from ._observability import ObservabilityResult as ObservabilityResult, observability as observability
+from ._options import (
+    Budget as Budget,
+    DriveOptions as DriveOptions,
+    IdentifyOptions as IdentifyOptions,
+    ModelOptions as ModelOptions,
+    Progress as Progress,
+)
 from ._predict import PredictResult as PredictResult, predict as predict
 from ._sample import sample as sample
 from ._simulate import SimulateResult as SimulateResult, simulate as simulate

@@ -18,6 +18,7 @@ from ._commands import measured_priors
 from ._diagnose import diagnose
 from ._identify import identify
 from ._identify_result import IdentifyResult
+from ._options import Budget, IdentifyOptions, ModelOptions, Progress
 from ._pages import demo_page
 from .outputs import plot_posterior
 from .plots import before_after_plot
@@ -38,8 +39,8 @@ class DemoBudget:
         rounds, sims, epochs: APT budget of each identification (epochs None: the default).
         base_rounds: rounds of the base-model identification (its job is to be flagged, and
             one round is enough for that).
+        ppc_draws: posterior draws of each identification's predictive band.
         diagnose: options of the diagnosis (`vdsbi.discovery.DiagnoseSettings` fields).
-        identify: further options of both identifications (`identify`'s keywords).
     """
 
     duration: float = 20.0
@@ -47,8 +48,8 @@ class DemoBudget:
     sims: int = 1000
     epochs: int | None = None
     base_rounds: int = 1
+    ppc_draws: int = 100
     diagnose: dict = dataclasses.field(default_factory=dict)
-    identify: dict = dataclasses.field(default_factory=dict)
 
 
 #: --quick: a 10 s drive, 2 x 300 simulations (base model 1 x 300), no diagnosis plots.
@@ -205,21 +206,28 @@ def _diagnose(rec, veh, d: Path, name: Path, *, seed: int, options: dict, log) -
 
 def _identify(rec, veh, d: Path, name: Path, folder: str, effects, *, budget, seed, progress, say, **kw):
     """One identification of the demo drive into d/folder with identify's default effects and
-    `effects` added (as the command diagnose prints), its table in table.txt."""
+    `effects` added (as the command diagnose prints), its table in table.txt. `kw`: `rounds`
+    (default: the budget's) and `priors`."""
     from ..inference import StatisticsMLP
 
-    apt = {"rounds": budget.rounds, "sims": budget.sims, "epochs": budget.epochs}
+    options = IdentifyOptions(
+        model=ModelOptions(add_effects=tuple(effects), priors=kw.get("priors") or {}),
+        budget=Budget(
+            rounds=kw.get("rounds", budget.rounds),
+            sims=budget.sims,
+            epochs=budget.epochs,
+            embedding=StatisticsMLP(),
+            ppc_draws=budget.ppc_draws,
+        ),
+        seed=seed,
+    )
     res = identify(
         rec,
         veh,
-        embedding=StatisticsMLP(),
-        seed=seed,
-        add_effects=list(effects),
+        options,
         out_dir=d / folder,
-        progress=progress,
-        log=say,
+        progress=Progress(say=say, bars=progress),
         names=_names(name, folder),
-        **(apt | kw | budget.identify),
     )
     (d / folder / "table.txt").write_text(res.table() + "\n")
     say(res.table())

@@ -7,14 +7,14 @@ import contextlib
 import dataclasses
 import json
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 if TYPE_CHECKING:
-    from ..inference import AbstractObservation
+    pass
 
 from ..estimation import ModelError, fit_likelihood, screened_sample
 from ..io import InputError, SimulationError, steer_response
@@ -31,11 +31,12 @@ from ..problem import (
     predictive_band,
     prior_box,
 )
-from ..simulator import LongitudinalChoice, SpeedDriven, model_class
+from ..simulator import SpeedDriven, model_class
 from ._extrapolation import held_out_extrapolation
 from ._identify_report import npe_check, ppc_summary, run_summary, run_warnings, validation_report
 from ._identify_result import IdentifyResult
-from ._progress import Progress
+from ._options import Budget, DriveOptions, IdentifyOptions, ModelOptions, Progress
+from ._progress import Bars
 from .outputs import (
     CHECKPOINT,
     RUN_FILE,
@@ -48,29 +49,11 @@ from .outputs import (
 def identify(
     recording,
     vehicle,
+    options: IdentifyOptions = IdentifyOptions(),
     *,
-    rounds: int = 2,
-    sims: int = 1000,
-    embedding: AbstractObservation | None = None,
-    seed: int = 0,
     out_dir: str | os.PathLike | None = None,
     resume: bool = False,
-    epochs: int | None = None,
-    num_samples: int = 1000,
-    segment: tuple[float, float] | None = None,
-    max_duration: float | None = None,
-    longitudinal: LongitudinalChoice = "auto",
-    bandwidth: float | Literal["auto"] | None = "auto",
-    effects: Sequence[str] | None = None,
-    add_effects: Sequence[str] = (),
-    priors: Mapping[str, tuple[float, float]] | None = None,
-    holdout: float = 0.3,
-    compare: Mapping[str, Any] | None = None,
-    ppc_draws: int = 100,
-    progress: bool = False,
-    rate: float = 200.0,
-    on_round_end: Callable | None = None,
-    log: Callable[[str], None] | None = None,
+    progress: Progress | None = None,
     names: tuple[Any, Any, Any] | None = None,
 ) -> IdentifyResult:
     """The vehicle's parameters (and enabled effects') from one drive or several of one car.
@@ -78,7 +61,7 @@ def identify(
     Stages: read the drives; make the validation problem (the last `holdout` of the usable
     driving held out) and the full one (all of it); choose the effects and the prior box; train
     the neural posterior (APT) on the validation problem's training part; fit the likelihood
-    posterior there from its draws (`vdsbi.diagnostics.fit_likelihood`: best fit through the
+    posterior there from its draws (`vdsbi.estimation.fit_likelihood`: best fit through the
     simulator, model error in the noise model, Laplace) and score it on the held-out part with
     its predictive band; refit on all the driving from that fit: the exported estimate and the
     reported posterior; check the neural posterior against the likelihood one; flag what the
@@ -88,59 +71,40 @@ def identify(
         recording: path (.csv, .parquet, bag), a `vdsbi.io.Recording`, or a sequence of them
             (recordings of one car, identified jointly, each window from its own state).
         vehicle: path (.json/.yaml) or a `vdsbi.simulator.Vehicle`.
-        rounds, sims: APT rounds and simulations per round.
-        embedding: `vdsbi.inference.StatisticsMLP()` (None, the default) or `TrajectoryCNN()`.
-        seed: the only source of randomness; same seed, same machine → identical samples.
+        options: the drive's problem, the model, the estimators' budget, the seed.
         out_dir: write posterior.json, samples.csv, plots, report.html, estimator.npz and the
             per-round checkpoint here (None: write nothing).
-        resume: continue from `out_dir`'s checkpoint (must have been made with the same settings).
-        epochs: maximum training epochs per round.
-        num_samples: posterior samples kept.
-        segment: (t0, t1) s to restrict the drive to (default: all of it).
-        max_duration: longest window, s (default 20 in torque mode, 10 in speed mode).
-        longitudinal: "torque", "speed" (follow the measured speed) or "auto".
-        bandwidth: low-pass cutoff, Hz, shared by measured and simulated channels.
-        effects: effects whose parameters join θ; None: `default_effects`.
-        add_effects: effects added to `effects` (or to the defaults): what a diagnosis named.
-        priors: {name: (low, high)} replacing the prior box of any parameter (e.g. the ranges
-            `vdsbi diagnose` measured for an effect's parameters).
-        holdout: fraction of the usable driving held out to validate on (0: none; the estimate
-            is always refit on all of it).
-        compare: reference values {param: value} (e.g. a lab's) scored on the held-out part.
-        ppc_draws: posterior draws simulated for the predictive band.
-        progress: tqdm bars.
-        on_round_end: extra hook called with the APT state after each round's checkpoint.
-        log: where one-line messages go (default: nowhere).
+        resume: continue from `out_dir`'s checkpoint (must have been made with the same options).
+        progress: where messages, bars and round hooks go (None: nowhere).
         names: (recording, vehicle, out_dir) as the user knows them, for the commands printed.
 
     Raises:
-        InputError: bad recording, vehicle, settings, a non-empty `out_dir` without `resume`, or
+        InputError: bad recording, vehicle, options, a non-empty `out_dir` without `resume`, or
             a drive on which almost every simulation fails.
     """
     import jax
 
-    say = log or (lambda s: None)
-    recs, veh = _load(recording, vehicle, rate)
-    settings = _settings(rounds, sims, embedding, epochs, num_samples)
-    prob = _problem(recs, veh, longitudinal, segment, max_duration, bandwidth, holdout)
-    full = prob if holdout == 0 else _problem(recs, veh, longitudinal, segment, max_duration, bandwidth, 0.0)
-    effects = _effects(prob, effects, add_effects, say)
-    box = _box(veh, effects, priors, grip_used(full))
-    run_info = _run_info(recs, prob, settings, seed, effects, box)
+    progress = progress or Progress(say=lambda s: None)
+    say, drive, model, budget = progress.say, options.drive, options.model, options.budget
+    recs, veh = _load(recording, vehicle, drive.rate)
+    settings = _settings(budget)
+    prob = _problem(recs, veh, drive, drive.holdout)
+    full = prob if drive.holdout == 0 else _problem(recs, veh, drive, 0.0)
+    effects = _effects(prob, model, say)
+    box = _box(veh, effects, model.priors, grip_used(full))
+    run_info = _run_info(recs, prob, settings, options.seed, effects, box)
     _describe(prob, full, say)
-    k_id, k_val, k_post, k_band = jax.random.split(jax.random.key(int(seed)), 4)
+    k_id, k_val, k_post, k_band = jax.random.split(jax.random.key(int(options.seed)), 4)
     working = contextlib.nullcontext() if out_dir is None else checkpoint_dir(out_dir, resume=resume)
     with working as out:
         state = None if out is None else _start(out, run_info, resume, say)
-        estimator, npe_samples, state = _train(
-            k_id, prob, box, effects, settings, state, out, progress, on_round_end, say
-        )
+        estimator, npe_samples, state = _train(k_id, prob, box, effects, settings, state, out, progress)
         starts = _starts(npe_samples, box, _steer_lag(recs[0], veh))
         checked, fit = _fit_likelihood(prob, full, starts, box, effects, say)
         prob, full = checked.with_fitted_starts(prob), fit.with_fitted_starts(full)
-        kw = dict(vehicle=veh, run_info=run_info, box=box, effects=effects, compare=compare)
-        kw |= dict(names=names or (recording, vehicle, out_dir), longitudinal=longitudinal)
-        kw |= dict(num_samples=settings.num_samples, ppc_draws=ppc_draws)
+        kw = dict(vehicle=veh, run_info=run_info, box=box, effects=effects, compare=options.compare)
+        kw |= dict(names=names or (recording, vehicle, out_dir), longitudinal=drive.longitudinal)
+        kw |= dict(num_samples=settings.num_samples, ppc_draws=budget.ppc_draws)
         keys = (k_val, k_post, k_band)
         result = _result(keys, prob, full, checked, fit, estimator, npe_samples, state, out, **kw)
         if out is not None:
@@ -222,45 +186,50 @@ def _load(recording, vehicle, rate: float):
     return recs, veh
 
 
-def _settings(rounds, sims, embedding, epochs, num_samples):
-    """`IdentifySettings` (which checks them) with `epochs` as the training's epoch limit."""
+def _settings(budget: Budget):
+    """The neural estimator's `IdentifySettings` (which checks them), `budget.epochs` its epoch
+    limit."""
     from ..inference import IdentifySettings, StatisticsMLP
 
-    embedding = StatisticsMLP() if embedding is None else embedding
-    base = IdentifySettings(embedding=embedding)  # the embedding's own training default
-    cfg = base.config
-    if epochs is not None:
-        cfg = dataclasses.replace(cfg, training=dataclasses.replace(cfg.training, max_epochs=int(epochs)))
+    embedding = StatisticsMLP() if budget.embedding is None else budget.embedding
+    cfg = IdentifySettings(embedding=embedding).config  # the embedding's own training default
+    if budget.epochs is not None:
+        cfg = dataclasses.replace(
+            cfg, training=dataclasses.replace(cfg.training, max_epochs=int(budget.epochs))
+        )
     return IdentifySettings(
-        rounds=int(rounds),
-        sims_per_round=int(sims),
+        rounds=int(budget.rounds),
+        sims_per_round=int(budget.sims),
         embedding=embedding,
-        num_samples=int(num_samples),
+        num_samples=int(budget.num_samples),
         config=cfg,
     )
 
 
-def _problem(
-    recs, veh, longitudinal: LongitudinalChoice, segment, max_duration, bandwidth, holdout: float
-) -> Problem:
+def _problem(recs, veh, drive: DriveOptions, holdout: float) -> Problem:
     """The drives as one `Problem`: 20-s windows with torques, 10-s windows following the speed."""
-    if max_duration is not None and max_duration <= 0:
+    if drive.max_duration is not None and drive.max_duration <= 0:
         raise InputError("settings", "--max-duration", "must be > 0")
     if not 0.0 <= holdout < 1.0:
         raise InputError("settings", "--holdout", f"must lie in [0, 1), got {holdout}")
-    speed = issubclass(model_class(longitudinal_mode(recs[0], longitudinal)), SpeedDriven)
-    window = max_duration if max_duration is not None else (10.0 if speed else 20.0)
+    speed = issubclass(model_class(longitudinal_mode(recs[0], drive.longitudinal)), SpeedDriven)
+    window = drive.max_duration if drive.max_duration is not None else (10.0 if speed else 20.0)
     settings = ProblemSettings(
-        longitudinal=longitudinal, max_window=window, segment=segment, bandwidth=bandwidth, held_out=holdout
+        longitudinal=drive.longitudinal,
+        max_window=window,
+        segment=drive.segment,
+        bandwidth=drive.bandwidth,
+        held_out=holdout,
     )
     return concat_problems([make_problem(r, veh, settings) for r in recs])
 
 
-def _effects(prob: Problem, effects, add_effects, say) -> tuple[str, ...]:
+def _effects(prob: Problem, model: ModelOptions, say) -> tuple[str, ...]:
     """The user's effects, else `default_effects` (each said with its reason), then `add_effects`,
     in the registry's order."""
     from ..simulator import EFFECTS
 
+    effects, add_effects = model.effects, model.add_effects
     unknown = [e for e in (*(effects or ()), *add_effects) if e not in EFFECTS]
     if unknown:
         known = ", ".join(EFFECTS)
@@ -334,11 +303,11 @@ def _start(out: Path, run_info: dict, resume: bool, say: Callable[[str], None]):
     return state
 
 
-def _train(key, prob: Problem, box: Box, effects, settings, state, out, progress, on_round_end, say):
+def _train(key, prob: Problem, box: Box, effects, settings, state, out, progress: Progress):
     """`vdsbi.inference.identify_problem` with progress bars, per-round checkpoints and messages."""
     from ..inference import BoxPrior, identify_problem, save_state
 
-    bars = Progress(settings.rounds, progress)
+    bars, say = Bars(settings.rounds, progress.bars), progress.say
 
     def round_end(st):
         if out is not None:
@@ -350,8 +319,8 @@ def _train(key, prob: Problem, box: Box, effects, settings, state, out, progress
             f"{h.get('epochs', '?')} epochs, best val loss {h.get('best_val_loss', float('nan')):.4g}"
             + (" (checkpoint saved)" if out is not None else "")
         )
-        if on_round_end is not None:
-            on_round_end(st)
+        if progress.on_round_end is not None:
+            progress.on_round_end(st)
 
     prior = BoxPrior(np.asarray(box.low), np.asarray(box.high), names=box.names)
     try:

@@ -17,7 +17,9 @@ class IdentifyResult:
     """What `identify` found.
 
     Attributes:
-        posterior: the trained neural posterior (`vdsbi.inference.Posterior`), for `vdsbi sample`.
+        neural_posterior: the trained neural posterior (`vdsbi.inference.Posterior`), for
+            `vdsbi sample`; it proposes the likelihood fit's starts, the reported posterior is the
+            likelihood one (`samples`, `estimate`).
         samples: (num_samples, P) draws of the reported (likelihood) posterior, names order.
         summary: the content of posterior.json (parameters with their estimate, noise model,
             combinations, validation, predictive check, warnings).
@@ -31,7 +33,7 @@ class IdentifyResult:
             `vdsbi.estimation.screened_sample`), what `predict --band` uses.
     """
 
-    posterior: Any
+    neural_posterior: Any
     samples: np.ndarray
     summary: dict[str, Any]
     out_dir: Path | None = None
@@ -39,6 +41,26 @@ class IdentifyResult:
     ppc: dict[str, Any] | None = None
     validation: Any = None
     predictive: np.ndarray | None = None
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The parameters, `samples`' column order."""
+        return tuple(self.summary["parameters"])
+
+    @property
+    def estimate(self) -> dict[str, float]:
+        """The best fit by parameter name: what `export` writes and `predict` simulates."""
+        return {n: float(p["estimate"]) for n, p in self.summary["parameters"].items()}
+
+    @property
+    def interval(self) -> dict[str, tuple[float, float]]:
+        """The reported posterior's 90 % interval by parameter name."""
+        return {n: (float(p["q05"]), float(p["q95"])) for n, p in self.summary["parameters"].items()}
+
+    @property
+    def identified(self) -> dict[str, bool]:
+        """Whether the drive identifies each parameter alone (see `table` for why not)."""
+        return {n: p.get("identified") is not False for n, p in self.summary["parameters"].items()}
 
     def table(self) -> str:
         """Per parameter: the estimate (the best fit, what `export` writes and `predict` simulates),

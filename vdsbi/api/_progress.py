@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 
-class Progress:
+class Bars:
     """tqdm bars per round: simulations, then training epochs with the validation loss.
 
     The methods are `vdsbi.inference.identify`'s hooks (`on_simulate`, `on_epoch_end`, and

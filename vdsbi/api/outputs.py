@@ -72,7 +72,7 @@ def write_outputs(out: Path, result: Any, prob: Any, ppc: dict[str, np.ndarray])
             tmp / PREDICTIVE, index=False, float_format="%.9g"
         )
         (tmp / "posterior.json").write_text(result.to_json() + "\n")
-        result.posterior.save(tmp / ESTIMATOR)
+        result.neural_posterior.save(tmp / ESTIMATOR)
         plot_posterior(result.summary, result.samples, tmp / "pairplot.png")
         ppc_plot(prob, ppc, tmp / "ppc.png")
         (tmp / "report.html").write_text(identify_page(result.summary, tmp, also=[out]))

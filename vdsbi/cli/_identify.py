@@ -115,29 +115,35 @@ def run(args) -> int:
     from ..inference import OBSERVATIONS
 
     quiet = args.quiet
+    effects, add_effects = _effects(args.effects)
+    options = api.IdentifyOptions(
+        drive=api.DriveOptions(
+            segment=args.segment,
+            max_duration=args.max_duration,
+            longitudinal=args.longitudinal,
+            bandwidth="auto" if args.bandwidth is None else args.bandwidth,
+            holdout=args.holdout,
+            rate=args.rate,
+        ),
+        model=api.ModelOptions(effects=effects, add_effects=add_effects, priors=_priors(args.prior) or {}),
+        budget=api.Budget(
+            rounds=args.rounds,
+            sims=args.sims,
+            epochs=args.epochs,
+            embedding=OBSERVATIONS[args.embedding],
+            num_samples=args.samples,
+        ),
+        seed=args.seed,
+        compare=_compare(args.compare),
+    )
+    progress = None if quiet else api.Progress(say=lambda s: print(s, flush=True), bars=sys.stderr.isatty())
     res = api.identify(
         args.recording if len(args.recording) > 1 else args.recording[0],
         args.vehicle,
-        rounds=args.rounds,
-        sims=args.sims,
-        embedding=OBSERVATIONS[args.embedding],
-        seed=args.seed,
+        options,
         out_dir=args.out,
         resume=args.resume,
-        epochs=args.epochs,
-        num_samples=args.samples,
-        segment=args.segment,
-        max_duration=args.max_duration,
-        longitudinal=args.longitudinal,
-        bandwidth="auto" if args.bandwidth is None else args.bandwidth,
-        effects=_effects(args.effects)[0],
-        add_effects=_effects(args.effects)[1],
-        compare=_compare(args.compare),
-        priors=_priors(args.prior),
-        holdout=args.holdout,
-        rate=args.rate,
-        progress=not quiet and sys.stderr.isatty(),
-        log=None if quiet else (lambda s: print(s, flush=True)),
+        progress=progress,
     )
     if quiet:
         for w in res.summary["warnings"]:

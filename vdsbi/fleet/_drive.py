@@ -261,12 +261,16 @@ def _identify(drive: Drive, platform, folder: Path, escalation: Escalation, why:
         api.identify,
         str(drive.recording),
         str(drive.vehicle),
-        rounds=escalation.rounds,
-        sims=escalation.sims,
-        epochs=escalation.epochs,
-        ppc_draws=escalation.ppc_draws,
-        effects=None if platform is None else list(platform.effects),
-        holdout=0.0,
+        api.IdentifyOptions(
+            drive=api.DriveOptions(holdout=0.0),
+            model=api.ModelOptions(effects=None if platform is None else tuple(platform.effects)),
+            budget=api.Budget(
+                rounds=escalation.rounds,
+                sims=escalation.sims,
+                epochs=escalation.epochs,
+                ppc_draws=escalation.ppc_draws,
+            ),
+        ),
         out_dir=target,
         resume=resume,
     )
