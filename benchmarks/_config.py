@@ -6,16 +6,13 @@ import dataclasses
 from vdsbi.inference import (
     ChannelStandardization,
     FlowMatchingSettings,
-    GlobalStandardization,
-    IdentityMap,
-    LogitMap,
-    NoStandardization,
     NPEConfig,
     SequentialSettings,
     SplineFlowSettings,
     TrainingSettings,
-    TrajectoryStandardization,
 )
+from vdsbi.inference._standardize import GlobalStandardization, NoStandardization, TrajectoryStandardization
+from vdsbi.inference._theta_map import IdentityMap, LogitMap
 
 #: The results files store a config flat, under these names: the spline flow's fields as they
 #: are, the flow-matching estimator's with an ``fmpe_`` prefix, ``estimator`` ("nsf" or

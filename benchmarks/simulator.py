@@ -44,7 +44,7 @@ V0 = 10.5
 def numpy_rhs(t, y, theta, veh, inputs):
     """The base model's vector field and sensor readings (seed eq. 1–13), in numpy.
 
-    A line-by-line port of `vdsbi.simulator.VehicleModel.evaluate` without effects.
+    A line-by-line port of `vdsbi.simulator.models.VehicleModel`'s `evaluate` without effects.
 
     Args:
         t: time, s.
@@ -178,12 +178,12 @@ def jax_draws_per_s(ns, duration, repeats, dt=0.0025):
     from vdsbi.simulator import (
         PARAM_NAMES,
         SEED_TRUE_THETA,
-        Solver,
         default_vehicle,
         make_model,
         seed_profile,
         solve_batch,
     )
+    from vdsbi.simulator.solvers import Solver
 
     model = make_model(default_vehicle())
     inputs = seed_profile(duration)

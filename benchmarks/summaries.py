@@ -25,16 +25,8 @@ from _config import flat_config, make_config
 
 from vdsbi.diagnostics import expected_coverage, sbc_ks_pvalues, sbc_ranks
 from vdsbi.inference import OBSERVATIONS, IdentifySettings, identify, seed_prior
-from vdsbi.simulator import (
-    PARAM_NAMES,
-    SEED_CHANNELS,
-    SensorNoise,
-    StiffnessMixtureNoise,
-    StochasticSimulator,
-    default_vehicle,
-    make_model,
-    seed_profile,
-)
+from vdsbi.simulator import PARAM_NAMES, SEED_CHANNELS, default_vehicle, make_model, seed_profile
+from vdsbi.simulator.measurement import SensorNoise, StiffnessMixtureNoise, StochasticSimulator
 
 ROOT = Path(__file__).resolve().parent.parent
 LEVELS = (0.5, 0.8, 0.9, 0.95)

@@ -60,18 +60,10 @@ sys.path.insert(0, str(ROOT / "experiments"))
 import outside_physics  # noqa: E402
 
 from vdsbi.discovery import diagnose_mismatch, effect_names  # noqa: E402
-from vdsbi.simulator import (  # noqa: E402
-    CHANNELS,
-    EFFECTS,
-    PARAM_NAMES,
-    VEHICLE_KEYS,
-    Inputs,
-    Solver,
-    Vehicle,
-    default_vehicle,
-    random_profile,
-    simulate,
-)
+from vdsbi.simulator import CHANNELS, PARAM_NAMES, Inputs, Vehicle, default_vehicle, random_profile, simulate  # noqa: E402
+from vdsbi.simulator._vehicle import VEHICLE_KEYS  # noqa: E402
+from vdsbi.simulator.effects import EFFECTS  # noqa: E402
+from vdsbi.simulator.solvers import Solver  # noqa: E402
 
 NOISE_RANGES = {
     "ax": (0.05, 0.15),

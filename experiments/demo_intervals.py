@@ -2,7 +2,7 @@
 
     python experiments/demo_intervals.py [--quick] [--drives N]
 
-Each drive is the demo's own (`api.demo_recording`: the built-in car, a random maneuver, the
+Each drive is the demo's own (`api._demo.demo_recording`: the built-in car, a random maneuver, the
 concealed IMU bias, sensor noise), one per seed. It goes through the loop's last step as the demo
 runs it: `api.identify` with `+sensor_bias` (what diagnose names there), its defaults otherwise,
 a small neural budget (the neural posterior only proposes starts; the reported posterior is the
@@ -25,7 +25,7 @@ from pathlib import Path
 from scipy.stats import binom
 
 from vdsbi import api
-from vdsbi.api import demo_recording
+from vdsbi.api._demo import demo_recording
 
 RESULTS = Path(__file__).parent / "results"
 

@@ -56,11 +56,11 @@ from vdsbi.simulator import (  # noqa: E402
     PARAM_NAMES,
     SEED_CHANNELS,
     SEED_TRUE_THETA,
-    Solver,
     default_vehicle,
     make_model,
     seed_profile,
 )
+from vdsbi.simulator.solvers import Solver  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ROOT = Path(__file__).resolve().parents[1]

@@ -33,14 +33,12 @@ from vdsbi.simulator import (
     PARAM_NAMES,
     SEED_CHANNELS,
     SEED_TRUE_THETA,
-    SensorNoise,
-    StiffnessMixtureNoise,
-    StochasticSimulator,
     default_vehicle,
     make_model,
     seed_profile,
     theta_from_dict,
 )
+from vdsbi.simulator.measurement import SensorNoise, StiffnessMixtureNoise, StochasticSimulator
 
 RESULTS = Path(__file__).parent / "results"
 #: The issue's wall-time goal for the whole run (5 rounds × 5000 simulations, CNN, 2 CPU cores).

@@ -37,15 +37,9 @@ import linear_baseline  # noqa: E402
 
 from vdsbi import api  # noqa: E402
 from vdsbi.io import build_recording, load_drive  # noqa: E402
-from vdsbi.problem import (  # noqa: E402
-    ProblemSettings,
-    band_coverage,
-    channel_scores,
-    make_problem,
-    predict,
-    predictive_band,
-)
-from vdsbi.simulator import get_effect  # noqa: E402
+from vdsbi.problem import ProblemSettings, make_problem  # noqa: E402
+from vdsbi.problem.validation import band_coverage, channel_scores, predict, predictive_band  # noqa: E402
+from vdsbi.simulator.effects import get_effect  # noqa: E402
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "real"
 RESULTS = Path(__file__).parent / "results"

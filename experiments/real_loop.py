@@ -41,8 +41,9 @@ from real_drives import REAL, baseline, nrmse, reference, without_torques  # noq
 from vdsbi import api  # noqa: E402
 from vdsbi.cli import main as vdsbi  # noqa: E402
 from vdsbi.io import build_recording, load_drive  # noqa: E402
-from vdsbi.problem import ProblemSettings, make_problem, predict  # noqa: E402
-from vdsbi.simulator import get_effect  # noqa: E402
+from vdsbi.problem import ProblemSettings, make_problem  # noqa: E402
+from vdsbi.problem.validation import predict  # noqa: E402
+from vdsbi.simulator.effects import get_effect  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 TRAIN_FRACTION = 0.7

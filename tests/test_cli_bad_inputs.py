@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from vdsbi.cli import main, output_dir
-from vdsbi.io import InputError, read_recording, write_bag
+from vdsbi.io import InputError, read_recording
+from vdsbi.io._bag_writer import write_bag
 
 DATA = Path(__file__).parent / "data"
 BAD, GOOD = DATA / "bad", DATA / "good"

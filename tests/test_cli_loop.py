@@ -251,7 +251,7 @@ def test_export_bad_input_exits_2(tmp_path, capsys):
 def test_effect_priors_come_from_fit_bounds_and_vehicle_json_overrides_them(tmp_path):
     from vdsbi.io import read_vehicle
     from vdsbi.problem import prior_box
-    from vdsbi.simulator import get_effect
+    from vdsbi.simulator.effects import get_effect
 
     data = {**default_vehicle().to_dict(), "prior": {"sensor_bias.ay": [-1.0, 0.2]}}
     (tmp_path / "v.json").write_text(json.dumps(data))

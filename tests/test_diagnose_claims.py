@@ -14,7 +14,7 @@ import pytest
 import vdsbi.discovery
 from vdsbi import api
 from vdsbi.cli import build_parser, main
-from vdsbi.discovery import held_out_improves
+from vdsbi.discovery._diagnose import held_out_improves
 
 
 def _held(ay, yaw):

@@ -13,7 +13,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from vdsbi.discovery import REQUIRED_KEYS, Fitter, verdict  # noqa: E402
+from vdsbi.discovery._fit import Fitter  # noqa: E402
+from vdsbi.discovery._rank import verdict  # noqa: E402
+from vdsbi.discovery._report import REQUIRED_KEYS  # noqa: E402
 from vdsbi.io import build_recording, read_recording, read_vehicle  # noqa: E402
 from vdsbi.problem import make_problem  # noqa: E402
 from vdsbi.simulator import CHANNELS, PARAM_NAMES, simulate  # noqa: E402
@@ -121,7 +123,7 @@ def test_fit_recovers_theta_noise_free(quick, x64):
 def test_pairs_pay_a_prior_penalty_and_ranking_agrees_with_choice():
     from types import SimpleNamespace
 
-    from vdsbi.discovery import choose, rank
+    from vdsbi.discovery._rank import choose, rank
 
     def fit(chi2, k, tau=1.0):
         # one channel whose evidence is the white-noise χ² difference at τ = 1

@@ -6,21 +6,20 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vdsbi.discovery import diagnose_mismatch, effect_names, effect_space, single_candidates
+from vdsbi.discovery import diagnose_mismatch, effect_names
+from vdsbi.discovery._candidates import effect_space, single_candidates
 from vdsbi.io import build_recording
 from vdsbi.simulator import (
     CHANNELS,
-    EFFECTS,
     PARAM_NAMES,
     SEED_TRUE_THETA,
-    VEHICLE_KEYS,
-    AbstractEffect,
     Vehicle,
     default_vehicle,
     random_profile,
-    register_effect,
     simulate,
 )
+from vdsbi.simulator._vehicle import VEHICLE_KEYS
+from vdsbi.simulator.effects import EFFECTS, AbstractEffect, register_effect
 
 NOISE = {"ax": 0.1, "ay": 0.1, "yaw_rate": 0.004, "omega_front": 0.1, "omega_rear": 0.1}
 

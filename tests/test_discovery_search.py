@@ -5,7 +5,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from vdsbi.discovery import forward_search, rank
+from vdsbi.discovery._rank import rank
+from vdsbi.discovery._search import forward_search
 
 N = 10_000
 PENALTY = 0.5 * np.log(N)  # BIC cost of one parameter, in log-evidence

@@ -8,21 +8,15 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vdsbi.discovery import Fitter, discover_terms, effect_space, select_terms
+from vdsbi.discovery._candidates import effect_space
+from vdsbi.discovery._fit import Fitter
+from vdsbi.discovery._terms import discover_terms, select_terms
 from vdsbi.io import build_recording
 from vdsbi.problem import make_problem
-from vdsbi.simulator import (
-    CHANNELS,
-    PARAM_NAMES,
-    SEED_TRUE_THETA,
-    Solver,
-    VehicleModel,
-    default_vehicle,
-    random_profile,
-    solve,
-    term_effect,
-    term_formula,
-)
+from vdsbi.simulator import CHANNELS, PARAM_NAMES, SEED_TRUE_THETA, default_vehicle, random_profile, solve
+from vdsbi.simulator.effects import term_effect, term_formula
+from vdsbi.simulator.models import VehicleModel
+from vdsbi.simulator.solvers import Solver
 
 NOISE = {"ax": 0.08, "ay": 0.08, "yaw_rate": 0.003, "omega_front": 0.08, "omega_rear": 0.08}
 CANDIDATES = (
@@ -103,7 +97,7 @@ def _section(
 ):
     from types import SimpleNamespace as NS
 
-    from vdsbi.discovery import terms_section
+    from vdsbi.discovery._terms import terms_section
 
     td = None
     if terms is not None:

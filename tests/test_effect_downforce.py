@@ -7,17 +7,15 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vdsbi.discovery import LOOKALIKE_GROUPS, effect_names, effect_space, single_candidates
+from vdsbi.discovery import effect_names
+from vdsbi.discovery._candidates import LOOKALIKE_GROUPS, effect_space, single_candidates
 from vdsbi.io import build_recording
 from vdsbi.problem import default_effects, make_problem, prior_box
 from vdsbi.simulator import (
-    EFFECTS,
     GRAVITY,
     SEED_TRUE_THETA,
     Inputs,
-    Solver,
     default_vehicle,
-    effect_params_from,
     make_model,
     seed_profile,
     simulate,
@@ -26,6 +24,8 @@ from vdsbi.simulator import (
 )
 from vdsbi.simulator._effects._aero_drag import AIR_DENSITY
 from vdsbi.simulator._effects._downforce import REFERENCE_SPEED
+from vdsbi.simulator.effects import EFFECTS, effect_params_from
+from vdsbi.simulator.solvers import Solver
 
 VEHICLE = default_vehicle()
 THETA = theta_from_dict(SEED_TRUE_THETA)

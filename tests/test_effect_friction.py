@@ -55,7 +55,7 @@ def test_prior_reaches_the_grip_the_drive_used():
     import dataclasses
 
     from vdsbi.problem import prior_box
-    from vdsbi.simulator import get_effect
+    from vdsbi.simulator.effects import get_effect
 
     vehicle = default_vehicle()
     effects = ("tyre_friction",)
@@ -76,7 +76,7 @@ def test_prior_floor_is_the_grip_the_drive_used(grip):
     # The car pulled grip × μ·g on its weight alone: neither axle's factor may sit far below grip
     # (per axle 0.9 × grip), whatever the effect's own lower bound; the box stays a box.
     from vdsbi.problem import prior_box
-    from vdsbi.simulator import get_effect
+    from vdsbi.simulator.effects import get_effect
 
     eff = get_effect("tyre_friction")
     box = prior_box(default_vehicle(), ("tyre_friction",), grip=grip)

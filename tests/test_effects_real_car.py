@@ -11,17 +11,9 @@ import numpy as np
 import pytest
 
 from vdsbi.estimation import levenberg_marquardt
-from vdsbi.simulator import (
-    CHANNELS,
-    PARAM_NAMES,
-    SEED_TRUE_THETA,
-    Inputs,
-    Solver,
-    default_vehicle,
-    effect_params_from,
-    make_model,
-    solve,
-)
+from vdsbi.simulator import CHANNELS, PARAM_NAMES, SEED_TRUE_THETA, Inputs, default_vehicle, make_model, solve
+from vdsbi.simulator.effects import effect_params_from
+from vdsbi.simulator.solvers import Solver
 
 VEHICLE = default_vehicle()
 NAMES = ("torque_gain", "signal_delay", "sensor_scale", "tyre_friction")
@@ -149,7 +141,7 @@ def test_parameters_recovered_from_a_noise_free_recording(setup, name):
     inputs = _inputs(steer_amp=0.12 if name == "tyre_friction" else 0.04)
     truth, ok = _run(model, theta, inputs, _params({name: TRUE[name]}))
     assert ok
-    from vdsbi.simulator import EFFECTS
+    from vdsbi.simulator.effects import EFFECTS
 
     start = jnp.asarray(EFFECTS[name].start, dtype=float)
     scale = jnp.asarray([1.0, 1.0, 0.01, 1.0, 1.0, 1.0])  # yaw rate in hundredths

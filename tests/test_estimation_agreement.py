@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from test_likelihood import THETA, _drive
 
-from vdsbi.discovery import Fitter
+from vdsbi.discovery._fit import Fitter
 from vdsbi.estimation import fit_likelihood
 from vdsbi.problem import Box, ProblemSettings, make_problem, parameter_names, prior_box
 from vdsbi.simulator import default_vehicle

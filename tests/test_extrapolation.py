@@ -20,7 +20,8 @@ from vdsbi.api._extrapolation import extrapolation
 from vdsbi.cli import main
 from vdsbi.cli._predict import extrapolation_lines
 from vdsbi.io import read_recording
-from vdsbi.problem import ProblemSettings, beyond_envelope, envelope, make_problem, predictive_band
+from vdsbi.problem import ProblemSettings, make_problem
+from vdsbi.problem.validation import beyond_envelope, envelope, predictive_band
 from vdsbi.simulator import (
     CHANNELS,
     SEED_TRUE_THETA,

@@ -7,26 +7,19 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vdsbi.diagnostics import (
-    fisher_from_jacobian,
-    fisher_information,
-    fisher_report,
-    model_fisher,
-    noise_std,
-    score_fisher_mc,
-)
-from vdsbi.diagnostics._fisher import scaled_mean_fn
+from vdsbi.diagnostics import fisher_report, model_fisher, score_fisher_mc
+from vdsbi.diagnostics._fisher import fisher_from_jacobian, fisher_information, noise_std, scaled_mean_fn
 from vdsbi.estimation import laplace_covariance, levenberg_marquardt
 from vdsbi.simulator import (
     CHANNELS,
     PARAM_NAMES,
     SEED_CHANNELS,
     SEED_TRUE_THETA,
-    Solver,
     default_vehicle,
     make_model,
     seed_profile,
 )
+from vdsbi.simulator.solvers import Solver
 
 THETA = np.array([SEED_TRUE_THETA[n] for n in PARAM_NAMES])
 
@@ -128,7 +121,7 @@ def test_report_rank_weakest_direction_and_crb(x64, short_case):
 
 def test_rank_decision_detects_a_null_direction(x64):
     # Two parameters entering only through their sum: rank 1, infinite bounds.
-    from vdsbi.diagnostics import Fisher
+    from vdsbi.diagnostics._fisher import Fisher
 
     jac = jnp.ones((10, 1, 2))
     f = fisher_from_jacobian(jac, jnp.ones((10, 1)))

@@ -5,7 +5,9 @@ import numpy as np
 import pytest
 
 from vdsbi.cli import main
-from vdsbi.fleet import detect_changes, gpd_fit, psis, read_manifest
+from vdsbi.fleet._changes import detect_changes
+from vdsbi.fleet._manifest import read_manifest
+from vdsbi.fleet._psis import gpd_fit, psis
 
 
 @pytest.mark.parametrize("k", [0.2, 0.5, 0.9])

@@ -8,28 +8,27 @@ import pytest
 from conftest import tree_allclose
 
 from vdsbi.inference import (
-    AtomicLoss,
     BoxPrior,
     IdentityEmbedding,
-    IdentityMap,
-    MaximumLikelihoodLoss,
     NPEConfig,
     SequentialSettings,
     SplineFlowSettings,
     TrainingSettings,
     _train,
     apt,
+    load_state,
+    save_state,
+)
+from vdsbi.inference._build import build_flow
+from vdsbi.inference._loss import (
+    AtomicLoss,
+    MaximumLikelihoodLoss,
     atom_indices,
     atomic_apt_loss,
-    build_flow,
-    init_opt_state,
     leak_penalty,
-    load_state,
-    make_optimizer,
-    save_state,
-    train_step,
-    train_steps,
 )
+from vdsbi.inference._theta_map import IdentityMap
+from vdsbi.inference._train import init_opt_state, make_optimizer, train_step, train_steps
 
 TINY = NPEConfig(
     flow=SplineFlowSettings(num_layers=2, num_bins=4, hidden=8),
@@ -228,7 +227,7 @@ def test_weight_average_is_the_ema_of_sequential_steps(getkey):
     # steps (live False) leave it untouched; a different decay reuses the trace
     import equinox as eqx
 
-    from vdsbi.inference import trainable_filter
+    from vdsbi.inference._train import trainable_filter
 
     theta, x, flow0, opt = _tiny_problem(getkey, 128)
     keys = jax.random.split(getkey(), 4)
@@ -416,7 +415,7 @@ def test_fit_takes_an_optax_optimizer(getkey):
     # `fit` trains with the optimiser it is given; a schedule needs an injected learning rate
     import optax
 
-    from vdsbi.inference import fit
+    from vdsbi.inference._train import fit
 
     theta, x, flow, _ = _tiny_problem(getkey, 128)
     is_val, prior_mask = np.arange(128) % 8 == 0, np.ones(128, bool)
@@ -435,7 +434,7 @@ def test_fit_takes_an_optax_optimizer(getkey):
 
 def test_eval_steps_ignores_padding_batches(getkey):
     # padding batches (live=False, skipped) cannot change the validation loss
-    from vdsbi.inference import eval_steps
+    from vdsbi.inference._train import eval_steps
 
     theta, x, flow, _ = _tiny_problem(getkey, 128)
     batches = tuple(a.reshape(4, 32, *a.shape[1:]) for a in (theta, x, np.ones(128, bool)))

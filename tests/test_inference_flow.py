@@ -6,18 +6,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vdsbi.inference import (
-    BoxPrior,
-    ChannelStandardization,
-    ConditionalFlow,
-    GlobalStandardization,
-    IdentityEmbedding,
-    IdentityMap,
-    MLPEmbedding,
-    Posterior,
-    Standardizer,
-    TrajectoryStandardization,
-)
+from vdsbi.inference import BoxPrior, ChannelStandardization, IdentityEmbedding, MLPEmbedding, Posterior
+from vdsbi.inference._flow import ConditionalFlow
+from vdsbi.inference._standardize import GlobalStandardization, Standardizer, TrajectoryStandardization
+from vdsbi.inference._theta_map import IdentityMap
 
 
 def _perturbed(flow, key, scale):

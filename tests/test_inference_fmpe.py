@@ -9,17 +9,16 @@ import pytest
 
 from vdsbi.inference import (
     BoxPrior,
-    FlowMatchingEstimator,
     FlowMatchingSettings,
     IdentityEmbedding,
-    IdentityMap,
-    LogitMap,
     NPEConfig,
     Posterior,
     TrainingSettings,
     apt,
     npe,
 )
+from vdsbi.inference._flow_matching import FlowMatchingEstimator
+from vdsbi.inference._theta_map import IdentityMap, LogitMap
 
 
 def _perturbed(est, key, scale):

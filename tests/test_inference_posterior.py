@@ -7,7 +7,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vdsbi.inference import BoxPrior, ChannelStandardization, ConditionalFlow, MLPEmbedding, Posterior
+from vdsbi.inference import BoxPrior, ChannelStandardization, MLPEmbedding, Posterior
+from vdsbi.inference._flow import ConditionalFlow
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -75,7 +76,12 @@ def test_data_parallel_step_on_four_devices():
     out = _run(
         """
         import jax, jax.numpy as jnp, numpy as np
-        from vdsbi.inference import *
+        from vdsbi.inference import BoxPrior, IdentityEmbedding, Posterior
+        from vdsbi.inference import SplineFlowSettings, TrainingSettings
+        from vdsbi.inference._build import build_flow
+        from vdsbi.inference._loss import AtomicLoss, MaximumLikelihoodLoss
+        from vdsbi.inference._sharding import data_mesh, replicate, shard_batch
+        from vdsbi.inference._train import init_opt_state, make_optimizer, train_step
         assert len(jax.devices()) == 4
         prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
         theta = np.asarray(prior.sample(jax.random.key(0), 64))

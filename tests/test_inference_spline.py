@@ -4,14 +4,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vdsbi.inference import (
-    BoxPrior,
-    ConditionalFlow,
-    IdentityEmbedding,
-    num_spline_params,
-    rq_spline_forward,
-    rq_spline_inverse,
-)
+from vdsbi.inference import BoxPrior, IdentityEmbedding
+from vdsbi.inference._flow import ConditionalFlow
+from vdsbi.inference._spline import num_spline_params, rq_spline_forward, rq_spline_inverse
 
 BOUND = 3.0
 

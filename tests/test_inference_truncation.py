@@ -12,15 +12,15 @@ from scipy import stats
 from vdsbi.inference import (
     BoxPrior,
     IdentityEmbedding,
-    IdentityMap,
     NPEConfig,
     SplineFlowSettings,
     TrainingSettings,
     _truncation,
     apt,
-    build_flow,
 )
+from vdsbi.inference._build import build_flow
 from vdsbi.inference._posterior import flow_log_prob
+from vdsbi.inference._theta_map import IdentityMap
 
 FLOW = SplineFlowSettings(num_layers=2, num_bins=4, hidden=8, theta_map=IdentityMap())
 SAMPLES = 4000  # posterior draws that locate the region's level

@@ -13,10 +13,10 @@ from vdsbi.io import (
     find_segments,
     load_drive,
     read_recording,
-    speed_slope,
-    usable_segments,
-    write_bag,
 )
+from vdsbi.io._bag_writer import write_bag
+from vdsbi.io._recording import speed_slope
+from vdsbi.io._segments import usable_segments
 from vdsbi.simulator import Inputs
 
 DATA = Path(__file__).parent / "data"

@@ -6,14 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from vdsbi.io import (
-    InputError,
-    build_recording,
-    load_drive,
-    read_recording,
-    read_vehicle,
-    write_bag,
-)
+from vdsbi.io import InputError, build_recording, load_drive, read_recording, read_vehicle
+from vdsbi.io._bag_writer import write_bag
 from vdsbi.simulator import CHANNELS, Inputs
 
 DATA = Path(__file__).parent / "data"

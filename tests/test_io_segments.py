@@ -5,7 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vdsbi.io import build_recording, estimate_noise_std, find_segments, read_recording, usable_segments
+from vdsbi.io import build_recording, estimate_noise_std, find_segments, read_recording
+from vdsbi.io._segments import usable_segments
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "real"  # beside the checkout, where present
 

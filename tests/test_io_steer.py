@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vdsbi.io import InputError, build_recording, check_against_vehicle, read_vehicle
+from vdsbi.io import InputError, build_recording, read_vehicle
 from vdsbi.io._consistency import steer_response
+from vdsbi.io._drive import check_against_vehicle
 
 GOOD = Path(__file__).parent / "data" / "good"
 L = 2.7

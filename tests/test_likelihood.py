@@ -4,17 +4,11 @@ Laplace covariance."""
 import numpy as np
 import pytest
 
-from vdsbi.estimation import ModelError, fit_likelihood, prior_mean
+from vdsbi.estimation import ModelError, fit_likelihood
+from vdsbi.estimation._likelihood import prior_mean
 from vdsbi.io import build_recording
-from vdsbi.problem import (
-    Box,
-    ProblemSettings,
-    channel_scores,
-    make_problem,
-    prior_box,
-    simulate_draws,
-    windowed_model,
-)
+from vdsbi.problem import Box, ProblemSettings, make_problem, prior_box, simulate_draws, windowed_model
+from vdsbi.problem.validation import channel_scores
 from vdsbi.simulator import (
     CHANNELS,
     PARAM_NAMES,
@@ -242,7 +236,8 @@ def test_a_starting_noise_model_must_be_of_the_problems_channels():
 def test_prediction_draws_from_the_information_and_the_intervals_from_the_widened_covariance(getkey):
     import jax
 
-    from vdsbi.estimation import LikelihoodPosterior, NoiseModel
+    from vdsbi.estimation import NoiseModel
+    from vdsbi.estimation._likelihood import LikelihoodPosterior
 
     box = Box(np.array([0.0, 0.0]), np.array([1.0, 1.0]), ("a", "b"))
     info = np.array([[0.04, 0.01], [0.01, 0.09]])
@@ -317,7 +312,7 @@ def test_a_delay_the_model_lacks_moves_the_transient_half_against_the_steady_one
 
 
 def test_the_prior_sits_at_an_effects_start_and_at_the_least_effect_a_box_allows():
-    from vdsbi.simulator import EFFECTS
+    from vdsbi.simulator.effects import EFFECTS
 
     friction = EFFECTS["tyre_friction"]
     names = (*PARAM_NAMES, "tyre_friction.scale_front", "tyre_friction.scale_rear")

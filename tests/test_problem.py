@@ -6,17 +6,10 @@ import numpy as np
 import pytest
 
 from vdsbi.io import build_recording
-from vdsbi.problem import (
-    ProblemSettings,
-    dof_factor,
-    lag1_autocorrelation,
-    make_problem,
-    predict,
-    simulate_draws,
-    validate,
-    windowed_model,
-    yaw_at_zero_steer,
-)
+from vdsbi.problem import ProblemSettings, dof_factor, make_problem, simulate_draws, windowed_model
+from vdsbi.problem._noise import lag1_autocorrelation
+from vdsbi.problem._problem import yaw_at_zero_steer
+from vdsbi.problem.validation import predict, validate
 from vdsbi.simulator import (
     CHANNELS,
     SEED_TRUE_THETA,

@@ -5,7 +5,8 @@ import pytest
 
 from vdsbi.diagnostics import vehicle_combinations
 from vdsbi.io import InputError, build_recording
-from vdsbi.problem import ProblemSettings, concat_problems, make_problem, predict
+from vdsbi.problem import ProblemSettings, concat_problems, make_problem
+from vdsbi.problem.validation import predict
 from vdsbi.simulator import (
     CHANNELS,
     GRAVITY,

@@ -3,7 +3,8 @@
 import numpy as np
 
 from vdsbi.io import build_recording
-from vdsbi.problem import ProblemSettings, make_problem, slides
+from vdsbi.problem import ProblemSettings, make_problem
+from vdsbi.problem._limit import slides
 from vdsbi.simulator import default_vehicle
 
 

@@ -5,8 +5,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from vdsbi.io import build_recording, find_segments, min_window
-from vdsbi.problem import ProblemSettings, lateral_information_share, make_problem
+from vdsbi.io import build_recording, find_segments
+from vdsbi.io._segments import min_window
+from vdsbi.problem import ProblemSettings, make_problem
+from vdsbi.problem._windows import lateral_information_share
 from vdsbi.simulator import CHANNELS, Inputs, default_vehicle, simulate, theta_from_dict
 
 #: A stiff, slightly understeering car: at 30 m/s a quarter of the seed profile's 0.05 rad of

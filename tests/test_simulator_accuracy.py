@@ -12,17 +12,16 @@ from vdsbi.simulator import (
     GRAVITY,
     NOMINAL_THETA,
     PARAM_NAMES,
-    RK4,
-    SEED_RELATIVE_NOISE,
     SEED_TRUE_THETA,
     Inputs,
-    Solver,
     constant_profile,
     default_vehicle,
     make_model,
     seed_profile,
     solve,
 )
+from vdsbi.simulator.measurement import SEED_RELATIVE_NOISE
+from vdsbi.simulator.solvers import RK4, Solver
 
 VEHICLE = default_vehicle()
 MODEL = make_model(VEHICLE)

@@ -14,7 +14,6 @@ import pytest
 from vdsbi.simulator import (
     PARAM_NAMES,
     SEED_TRUE_THETA,
-    TRACE_COUNT,
     Inputs,
     Vehicle,
     default_vehicle,
@@ -23,6 +22,7 @@ from vdsbi.simulator import (
     simulate,
     solve_batch,
 )
+from vdsbi.simulator._solve import TRACE_COUNT
 
 VEHICLE = default_vehicle()
 MODEL = make_model(VEHICLE, ["aero_drag"])

@@ -10,14 +10,8 @@ import pytest
 from vdsbi.cli import main
 from vdsbi.io import read_recording, read_vehicle
 from vdsbi.problem import smoothed_yaw_rate
-from vdsbi.simulator import (
-    CHANNELS,
-    PARAM_NAMES,
-    SEED_TRUE_THETA,
-    seed_profile,
-    simulate,
-    steady_lateral_state,
-)
+from vdsbi.simulator import CHANNELS, PARAM_NAMES, SEED_TRUE_THETA, seed_profile, simulate
+from vdsbi.simulator.models import steady_lateral_state
 
 GOOD = Path(__file__).parent / "data" / "good"
 VEHICLE = str(GOOD / "vehicle.json")

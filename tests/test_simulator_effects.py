@@ -12,22 +12,19 @@ import pytest
 
 from vdsbi.simulator import (
     CHANNELS,
-    EFFECTS,
     GRAVITY,
     PARAM_NAMES,
     SEED_TRUE_THETA,
-    AbstractEffect,
     Inputs,
-    Solver,
     default_vehicle,
-    effect_params_from,
     make_model,
-    register_effect,
     seed_profile,
     simulate,
     solve,
 )
 from vdsbi.simulator._effects._aero_drag import AIR_DENSITY
+from vdsbi.simulator.effects import EFFECTS, AbstractEffect, effect_params_from, register_effect
+from vdsbi.simulator.solvers import Solver
 
 VEHICLE = default_vehicle()
 NAMES = (*tuple(EFFECTS)[:10], "steer_offset")  # (a test below may register more)

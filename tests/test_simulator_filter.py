@@ -6,16 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vdsbi.simulator import (
-    PARAM_NAMES,
-    SEED_TRUE_THETA,
-    Decimator,
-    SensorNoise,
-    StochasticSimulator,
-    default_vehicle,
-    make_model,
-    seed_profile,
-)
+from vdsbi.simulator import PARAM_NAMES, SEED_TRUE_THETA, default_vehicle, make_model, seed_profile
+from vdsbi.simulator.measurement import Decimator, SensorNoise, StochasticSimulator
 
 RATE, CUTOFF, FACTOR = 200.0, 10.0, 4
 T = np.arange(2001) / RATE

@@ -5,17 +5,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vdsbi.simulator import (
-    EFFECTS,
-    PARAM_NAMES,
-    SEED_TRUE_THETA,
-    Solver,
-    default_vehicle,
-    effect_params_from,
-    make_model,
-    seed_profile,
-    solve,
-)
+from vdsbi.simulator import PARAM_NAMES, SEED_TRUE_THETA, default_vehicle, make_model, seed_profile, solve
+from vdsbi.simulator.effects import EFFECTS, effect_params_from
+from vdsbi.simulator.solvers import Solver
 
 NAMES = tuple(EFFECTS)[:10]
 

@@ -13,22 +13,21 @@ from vdsbi.simulator import (
     NOMINAL_THETA,
     PARAM_NAMES,
     SEED_TRUE_THETA,
-    TRACE_COUNT,
-    Args,
     Inputs,
-    Solver,
-    check_inputs,
     constant_profile,
     default_vehicle,
-    effect_params_from,
     make_model,
     random_profile,
     seed_profile,
     simulate,
     solve,
     solve_batch,
-    steady_lateral_state,
 )
+from vdsbi.simulator._model import Args
+from vdsbi.simulator._solve import TRACE_COUNT, check_inputs
+from vdsbi.simulator.effects import effect_params_from
+from vdsbi.simulator.models import steady_lateral_state
+from vdsbi.simulator.solvers import Solver
 
 VEHICLE = default_vehicle()
 TORQUE = make_model(VEHICLE)

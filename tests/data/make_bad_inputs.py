@@ -205,7 +205,8 @@ def write_topic_maps(m: dict) -> None:
 
 
 def write_bags(m: dict) -> None:
-    from vdsbi.io import build_recording, write_bag
+    from vdsbi.io import build_recording
+    from vdsbi.io._bag_writer import write_bag
 
     g = good_frame(rate=50.0, duration=2.0)
     rec = build_recording({c: g[c].to_numpy() for c in g.columns}, "good", rate=50.0)

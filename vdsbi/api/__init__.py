@@ -17,12 +17,7 @@ layers are imported on first use, so that the CLI starts quickly; `diagnose` ret
 
 from . import outputs as outputs, plots as plots
 from ._check import CheckResult as CheckResult, check as check
-from ._demo import (
-    DemoBudget as DemoBudget,
-    DemoResult as DemoResult,
-    demo as demo,
-    demo_recording as demo_recording,
-)
+from ._demo import DemoBudget as DemoBudget, DemoResult as DemoResult, demo as demo
 from ._design import DesignReport as DesignReport, design as design
 from ._diagnose import diagnose as diagnose
 from ._export import export as export

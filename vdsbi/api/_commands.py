@@ -7,7 +7,7 @@ import shlex
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-from ..simulator import LongitudinalChoice
+from ..simulator.models import LongitudinalChoice
 
 
 def shown(path: str | os.PathLike | None, default: str) -> str:
@@ -66,7 +66,7 @@ def measured_priors(
 ) -> dict[str, tuple[float, float]]:
     """Prior ranges {effect.param: (lo, hi)} around what a diagnosis measured: the value ±
     max(`PRIOR_STDS`·std, `PRIOR_FRACTION`·|value|), inside the effect's fit bounds and its null."""
-    from ..simulator import get_effect
+    from ..simulator.effects import get_effect
 
     out = {}
     for e in effects:

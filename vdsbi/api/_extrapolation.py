@@ -16,16 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from ..problem import (
-    ENVELOPE_UNITS,
-    Problem,
-    beyond_envelope,
-    envelope,
-    parameter_names,
-    predictive_band,
-    prior_box,
-)
-from ..simulator import EFFECTS, GRAVITY
+from ..problem import Problem, parameter_names, prior_box
+from ..problem.validation import ENVELOPE_UNITS, beyond_envelope, envelope, predictive_band
+from ..simulator import GRAVITY
+from ..simulator.effects import EFFECTS
 
 #: The effect whose parameters are the tyres' grip.
 GRIP = "tyre_friction"
@@ -50,14 +44,14 @@ def extrapolation(
         key: PRNG key of the widened band.
         problem: the driving predicted.
         mask: (W, K) the samples predicted (a held-out part, or all of another drive).
-        fitted: the fitted driving's envelope (`vdsbi.problem.envelope`).
-        band: the posterior-predictive band (`vdsbi.problem.predictive_band`) on `problem`, or
+        fitted: the fitted driving's envelope (`vdsbi.problem.validation.envelope`).
+        band: the posterior-predictive band (`vdsbi.problem.validation.predictive_band`) on `problem`, or
             None for the flags alone; `draws`, `noise_std` and `effects` are what it was made from.
 
     Returns:
         (the band, its `mask` samples of windows beyond the envelope where the grip acts replaced
         by the band with the grip drawn from its prior; the flagged windows of
-        `vdsbi.problem.beyond_envelope`, each whose band was so widened with "grip_from_prior":
+        `vdsbi.problem.validation.beyond_envelope`, each whose band was so widened with "grip_from_prior":
         {parameter: [low, high]}).
     """
     import jax

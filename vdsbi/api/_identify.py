@@ -28,10 +28,10 @@ from ..problem import (
     longitudinal_mode,
     make_problem,
     parameter_names,
-    predictive_band,
     prior_box,
 )
-from ..simulator import SpeedDriven, model_class
+from ..problem.validation import predictive_band
+from ..simulator.models import SpeedDriven, model_class
 from ._extrapolation import held_out_extrapolation
 from ._identify_report import npe_check, ppc_summary, run_summary, run_warnings, validation_report
 from ._identify_result import IdentifyResult
@@ -227,7 +227,7 @@ def _problem(recs, veh, drive: DriveOptions, holdout: float) -> Problem:
 def _effects(prob: Problem, model: ModelOptions, say) -> tuple[str, ...]:
     """The user's effects, else `default_effects` (each said with its reason), then `add_effects`,
     in the registry's order."""
-    from ..simulator import EFFECTS
+    from ..simulator.effects import EFFECTS
 
     effects, add_effects = model.effects, model.add_effects
     unknown = [e for e in (*(effects or ()), *add_effects) if e not in EFFECTS]

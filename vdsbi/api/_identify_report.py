@@ -14,16 +14,9 @@ import numpy as np
 
 from .. import __version__
 from ..io import InputError
-from ..problem import (
-    Box,
-    Problem,
-    band_coverage,
-    parameter_names,
-    parameter_units,
-    split_parameters,
-    validate,
-)
-from ..simulator import LongitudinalChoice
+from ..problem import Box, Problem, parameter_names, parameter_units, split_parameters
+from ..problem.validation import band_coverage, validate
+from ..simulator.models import LongitudinalChoice
 from ._commands import diagnose_command
 from ._trust import model_error_warning, trust_warnings
 from .outputs import summarise
@@ -241,7 +234,7 @@ def run_warnings(
 
 
 def _score(prob: Problem, values: np.ndarray, effects) -> dict[str, Any]:
-    from ..simulator import get_effect
+    from ..simulator.effects import get_effect
 
     theta, ep = split_parameters(values, effects)
     eff_values = {

@@ -29,8 +29,8 @@ class IdentifyResult:
         validation: the problem whose held-out part the band and the validation scores are on
             (`problem` itself when nothing is held out).
         predictive: (ppc_draws, P) parameter draws for predicting other driving at the estimate
-            (`vdsbi.estimation.LikelihoodPosterior.predictive_draws`, held against the likelihood by
-            `vdsbi.estimation.screened_sample`), what `predict --band` uses.
+            (the `predictive_draws` of `vdsbi.estimation.fit_likelihood`'s posterior, held against
+            the likelihood by `vdsbi.estimation.screened_sample`), what `predict --band` uses.
     """
 
     neural_posterior: Any

@@ -12,7 +12,8 @@ from typing import Any
 
 from ..io import InputError, Recording
 from ..problem import make_problem
-from ..simulator import CHANNELS, SEED_CHANNELS, Inputs, LongitudinalMode, Vehicle
+from ..simulator import CHANNELS, SEED_CHANNELS, Inputs, Vehicle
+from ..simulator.models import LongitudinalMode
 from ._validate import (
     PROFILE_V0,
     NoiseName,
@@ -162,7 +163,8 @@ def _model(
     vehicle: Vehicle, effects: Sequence[str], effect_params, longitudinal: LongitudinalMode = "torque"
 ):
     """The model with `effects` enabled and the effects' parameter vectors."""
-    from ..simulator import effect_params_from, make_model
+    from ..simulator import make_model
+    from ..simulator.effects import effect_params_from
 
     try:
         model = make_model(vehicle, list(effects), longitudinal=longitudinal)

@@ -7,7 +7,7 @@ import dataclasses
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Literal
 
-from ..simulator import LongitudinalChoice
+from ..simulator.models import LongitudinalChoice
 
 if TYPE_CHECKING:
     from ..inference import AbstractObservation, APTState

@@ -12,15 +12,10 @@ import numpy as np
 import pandas as pd
 
 from ..io import InputError, read_recording
-from ..problem import (
-    ProblemSettings,
-    band_coverage,
-    channel_scores,
-    make_problem,
-    predict as predict_problem,
-    predictive_band,
-)
-from ..simulator import Vehicle, get_effect
+from ..problem import ProblemSettings, make_problem
+from ..problem.validation import band_coverage, channel_scores, predict as predict_problem, predictive_band
+from ..simulator import Vehicle
+from ..simulator.effects import get_effect
 from ._export import load_run
 from ._extrapolation import extrapolation
 from .outputs import PREDICTIVE
@@ -37,7 +32,7 @@ class PredictResult:
         scores: {channel: {nrmse, rmse, chi2_dof, samples}} of the prediction over those samples.
         coverage: {channel: share of measured samples inside the 90 % band} (empty without it).
         extrapolation: the windows beyond the envelope of the driving the estimate was fitted on
-            (`vdsbi.problem.beyond_envelope`; with the band, those whose grip was drawn from its
+            (`vdsbi.problem.validation.beyond_envelope`; with the band, those whose grip was drawn from its
             prior say so), or None where the run stores no envelope.
     """
 

@@ -10,14 +10,12 @@ import numpy as np
 
 from ..io import InputError, Recording
 from ..problem import longitudinal_mode, measured_longitudinal, smoothed_yaw_rate
-from ..simulator import (
-    CHANNELS,
+from ..simulator import CHANNELS, Inputs, Vehicle
+from ..simulator.models import (
     AbstractVehicleModel,
-    Inputs,
     LongitudinalChoice,
     SpeedDriven,
     TorqueDriven,
-    Vehicle,
     model_class,
 )
 from ._validate import (
@@ -169,7 +167,7 @@ def _recording_inputs(rec: Recording, vehicle: Vehicle, mode: type[AbstractVehic
 def _lateral0(rec: Recording, theta: np.ndarray, vehicle: Vehicle, v0: float):
     """The recording's own initial lateral state, as a problem's window starts: its smoothed
     yaw rate and the steady-state side speed for it under θ (none without a yaw-rate channel)."""
-    from ..simulator import steady_lateral_state
+    from ..simulator.models import steady_lateral_state
 
     yaw = smoothed_yaw_rate(rec)
     if yaw is None:

@@ -12,15 +12,8 @@ from typing import Literal
 import numpy as np
 
 from ..io import InputError, read_vehicle
-from ..simulator import (
-    CHANNELS,
-    PARAM_NAMES,
-    SEED_TRUE_THETA,
-    SensorNoise,
-    Vehicle,
-    check_theta,
-    default_vehicle,
-)
+from ..simulator import CHANNELS, PARAM_NAMES, SEED_TRUE_THETA, Vehicle, check_theta, default_vehicle
+from ..simulator.measurement import SensorNoise
 
 #: Initial speed on a built-in profile, m/s (the middle of the seed's U[10, 11]).
 PROFILE_V0 = 10.5

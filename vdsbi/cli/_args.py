@@ -11,7 +11,8 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 from ..io import InputError
-from ..simulator import EFFECTS, PARAM_NAMES
+from ..simulator import PARAM_NAMES
+from ..simulator.effects import EFFECTS
 
 
 def json_object(text: str, flag: str) -> Mapping:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from .. import api
 from ..io import InputError, write_atomically
-from ..problem import ENVELOPE_UNITS
+from ..problem.validation import ENVELOPE_UNITS
 
 #: How the warnings name the envelope's quantities.
 LABELS = {"ay": "|a_y|", "speed": "speed", "steer_rate": "|steer rate|", "ax": "|a_x|"}

@@ -11,22 +11,11 @@ from ._combinations import (
     vehicle_combinations as vehicle_combinations,
 )
 from ._design import (
-    DesignProblem as DesignProblem,
-    DesignResult as DesignResult,
     check_limits as check_limits,
     design_maneuver as design_maneuver,
     design_problem as design_problem,
 )
-from ._fisher import (
-    Fisher as Fisher,
-    channel_noise as channel_noise,
-    fisher_from_jacobian as fisher_from_jacobian,
-    fisher_information as fisher_information,
-    model_fisher as model_fisher,
-    noise_std as noise_std,
-    param_names as param_names,
-    score_fisher_mc as score_fisher_mc,
-)
+from ._fisher import model_fisher as model_fisher, score_fisher_mc as score_fisher_mc
 from ._fisher_report import fisher_report as fisher_report, report_markdown as report_markdown
 from ._identifiability import (
     MAX_STD_RATIO as MAX_STD_RATIO,

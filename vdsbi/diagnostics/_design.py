@@ -20,18 +20,10 @@ import numpy as np
 import optax
 from jaxtyping import Array, Float
 
-from ..simulator import (
-    CHANNELS,
-    NOMINAL_THETA,
-    PARAM_NAMES,
-    RK4,
-    SEED_CHANNELS,
-    AbstractSolver,
-    AbstractVehicleModel,
-    Inputs,
-    SensorNoise,
-    solve,
-)
+from ..simulator import CHANNELS, NOMINAL_THETA, PARAM_NAMES, SEED_CHANNELS, Inputs, solve
+from ..simulator.measurement import SensorNoise
+from ..simulator.models import AbstractVehicleModel
+from ..simulator.solvers import RK4, AbstractSolver
 from ._fisher import channel_noise, scaled_fisher
 from ._maneuver import Limits, Maneuver
 

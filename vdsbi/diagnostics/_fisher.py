@@ -32,18 +32,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int, PRNGKeyArray
 
-from ..simulator import (
-    CHANNELS,
-    NOMINAL_THETA,
-    PARAM_NAMES,
-    RK4,
-    SEED_CHANNELS,
-    AbstractSolver,
-    AbstractVehicleModel,
-    Inputs,
-    SensorNoise,
-    solve,
-)
+from ..simulator import CHANNELS, NOMINAL_THETA, PARAM_NAMES, SEED_CHANNELS, Inputs, solve
+from ..simulator.measurement import SensorNoise
+from ..simulator.models import AbstractVehicleModel
+from ..simulator.solvers import RK4, AbstractSolver
 
 #: Default relative floor on the relative-noise std (see module docstring).
 FLOOR_FRACTION = 0.1

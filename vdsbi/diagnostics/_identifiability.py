@@ -32,7 +32,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..problem import Problem, dof_factor, windowed_model
-from ..simulator import PARAM_NAMES, RK4, AbstractSolver
+from ..simulator import PARAM_NAMES
+from ..simulator.solvers import RK4, AbstractSolver
 from ._fisher import fisher_from_jacobian
 
 #: Posterior std over prior std above which a parameter is reported as not identified.

@@ -1,6 +1,6 @@
 """Candidate explanations: "none" and each registered effect alone (sets of several are built
 by the forward search); and where the candidates' parameters sit in the fit. Everything is
-read from the effect registry (`vdsbi.simulator.EFFECTS`) at call time, so effects registered
+read from the effect registry (`vdsbi.simulator.effects.EFFECTS`) at call time, so effects registered
 after import count."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..simulator import EFFECTS
+from ..simulator.effects import EFFECTS
 
 
 def effect_names() -> tuple[str, ...]:
@@ -56,7 +56,7 @@ class EffectSpace:
 
 def effect_space(names: Sequence[str] | None = None, extra: Sequence[type] = ()) -> EffectSpace:
     """`EffectSpace` of `names` (default: every registered effect), read from the registry,
-    followed by the unregistered effect classes `extra` (e.g. `simulator.term_effect`)."""
+    followed by the unregistered effect classes `extra` (e.g. `simulator.effects.term_effect`)."""
     names = effect_names() if names is None else tuple(names)
     classes = [EFFECTS[n] for n in names] + list(extra)
     names = names + tuple(c.name for c in extra)

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..problem import Problem, channel_scores
+from ..problem import Problem
+from ..problem.validation import channel_scores
 
 
 def compared_inputs(problem: Problem) -> np.ndarray:
@@ -22,7 +23,7 @@ def held_out_from(problem: Problem) -> list[float]:
 
 
 def held_out_scores(problem: Problem, pred: np.ndarray, var: np.ndarray | None = None) -> dict:
-    """`vdsbi.problem.channel_scores` of the (W, K, C) prediction `pred` on the held-out
+    """`vdsbi.problem.validation.channel_scores` of the (W, K, C) prediction `pred` on the held-out
     samples of `problem` (no parameters were fitted on these). With `var` (W, K, C), the
     variance of the prediction that the fit's parameter uncertainty carries, also
     `chi2_dof_predictive`: the squared error over σ² + var, the check of the held-out data

@@ -25,7 +25,9 @@ from ..estimation import ModelError
 from ..io import Recording, read_recording, read_vehicle
 from ..problem import Box, Problem, ProblemSettings, default_effects, longitudinal_mode, make_problem
 from ..runtime import in_background
-from ..simulator import EFFECTS, PARAM_NAMES, SpeedDriven, Vehicle, model_class
+from ..simulator import PARAM_NAMES, Vehicle
+from ..simulator.effects import EFFECTS
+from ..simulator.models import SpeedDriven, model_class
 from ._candidates import effect_names, effect_space, label
 from ._data import compared_inputs, held_out_scores
 from ._fit import Fitter

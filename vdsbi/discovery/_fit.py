@@ -4,7 +4,7 @@ One *super-model* with every candidate effect enabled is built once per `Fitter`
 explanation is which effects are active: the others' parameters sit exactly at their null values,
 where they vanish, so every candidate's fit runs one compiled program (the free coordinates padded
 to one width). The effects, their fit bounds and starting values are read from the registry
-(`vdsbi.simulator.EFFECTS`, each effect's `bounds` and `start`) when a `Fitter` is built, so an
+(`vdsbi.simulator.effects.EFFECTS`, each effect's `bounds` and `start`) when a `Fitter` is built, so an
 effect added with `register_effect` is searched like a built-in one.
 
 A `DiscoveryFit` is the estimator's posterior seen in the search's layout: the unbounded vector
@@ -26,16 +26,10 @@ from jaxtyping import Array, Float
 
 from ..estimation import ModelError, SensorNoise, fit_likelihood
 from ..problem import Box, Problem, WindowedModel, windowed_model
-from ..simulator import (
-    EFFECTS,
-    PARAM_NAMES,
-    AbstractVehicleModel,
-    LongitudinalMode,
-    Solver,
-    Vehicle,
-    make_model,
-    model_class,
-)
+from ..simulator import PARAM_NAMES, Vehicle, make_model
+from ..simulator.effects import EFFECTS
+from ..simulator.models import AbstractVehicleModel, LongitudinalMode, model_class
+from ..simulator.solvers import Solver
 from ._candidates import EffectSpace, effect_space
 from ._results import DiscoveryFit
 

@@ -24,7 +24,7 @@ from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 from ..runtime import thread_map
-from ..simulator import EFFECTS
+from ..simulator.effects import EFFECTS
 from ._candidates import label
 from ._rank import STRONG, bic_score
 from ._results import DiscoveryFit

@@ -7,7 +7,7 @@ import functools
 import time
 from collections.abc import Callable, Sequence
 
-from ..simulator import LongitudinalChoice
+from ..simulator.models import LongitudinalChoice
 from ._candidates import effect_names
 
 
@@ -34,7 +34,7 @@ class DiagnoseSettings:
             (the test and the held-out comparison use the final step).
         workers: threads fitting a search step's candidates side by side (each fit keeps about
             one core busy).
-        max_terms: most candidate terms (`simulator.TERMS`) used to describe a mismatch the
+        max_terms: most candidate terms (`simulator.effects.TERMS`) used to describe a mismatch the
             chosen effects leave (p after the fix < alpha); 0: no term search.
         quiet: no progress lines.
         plots: write the figures (with `out_dir`).

@@ -1,7 +1,7 @@
 """A formula for what the library does not explain: sparse selection of candidate terms.
 
 When the chosen library effects leave the residual inconsistent with noise, the remaining
-mismatch is described as a sparse sum of candidate terms c·f(signals) (`simulator.TERMS`:
+mismatch is described as a sparse sum of candidate terms c·f(signals) (`simulator.effects.TERMS`:
 missing forces, input and measurement terms built from the model's own signals), entering
 through the differentiable simulator:
 
@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..simulator import TERMS, term_effect, term_formula
+from ..simulator.effects import TERMS, term_effect, term_formula
 from ._candidates import effect_space
 from ._fit import Fitter, whitened
 from ._rank import STRONG, bic_score, claim_limit, worst_channel

@@ -4,17 +4,10 @@ start speeds and their marginalisation, and the Laplace covariance with its wide
 diagnose and the experiments all fit with it."""
 
 from ._least_squares import (
-    LeastSquaresResult as LeastSquaresResult,
     laplace_covariance as laplace_covariance,
     levenberg_marquardt as levenberg_marquardt,
 )
-from ._likelihood import (
-    PRIOR_Z_STD as PRIOR_Z_STD,
-    LikelihoodPosterior as LikelihoodPosterior,
-    fit_likelihood as fit_likelihood,
-    prior_mean as prior_mean,
-    split_values as split_values,
-)
+from ._likelihood import PRIOR_Z_STD as PRIOR_Z_STD, fit_likelihood as fit_likelihood
 from ._noise import (
     ModelError as ModelError,
     NoiseModel as NoiseModel,

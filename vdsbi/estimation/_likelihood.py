@@ -32,7 +32,9 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from scipy.stats import norm
 
 from ..problem import Box, Part, Problem, parameter_names, simulate_draws, windowed_model
-from ..simulator import PARAM_NAMES, AbstractVehicleModel, Solver
+from ..simulator import PARAM_NAMES
+from ..simulator.models import AbstractVehicleModel
+from ..simulator.solvers import Solver
 from ._least_squares import laplace_covariance, levenberg_marquardt
 from ._noise import ModelError, NoiseModel, SensorNoise, measure_noise
 from ._start_speed import V0_STD, corrected_windows, own_columns, profiled, residual_and_jacobian

@@ -21,7 +21,7 @@ from jaxtyping import PRNGKeyArray
 from scipy.stats import chi2
 
 from ..problem import CLEAN_BATCH, Problem, simulate_draws, split_parameters, windowed_model
-from ..simulator import Solver
+from ..simulator.solvers import Solver
 from ._likelihood import PRIOR_Z_STD, LikelihoodPosterior
 
 #: A draw goes when its cost exceeds the quadratic model by more than ½·χ²_k at this level.

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..problem import Problem
-from ..simulator import TorqueDriven
+from ..simulator.models import TorqueDriven
 
 #: Prior std of a torque-driven window's start-speed correction, m/s.
 V0_STD = 1.0

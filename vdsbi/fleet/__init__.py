@@ -9,21 +9,11 @@ car's parameters followed over time by a sequential test.
 Needs the ``fleet`` extra (``pip install 'vdsbi[fleet]'``: Dask.distributed).
 """
 
-from ._amortized import (
-    AmortizedSettings as AmortizedSettings,
-    PlatformEstimator as PlatformEstimator,
-    Proposal as Proposal,
-    drive_proposal as drive_proposal,
-    train_estimator as train_estimator,
-)
-from ._changes import Change as Change, ChangeSettings as ChangeSettings, detect_changes as detect_changes
-from ._check import CheckResult as CheckResult, importance_check as importance_check
+from ._amortized import AmortizedSettings as AmortizedSettings
+from ._changes import ChangeSettings as ChangeSettings
 from ._drive import Escalation as Escalation
 from ._engine import Cluster as Cluster
 from ._fleet import FleetResult as FleetResult, FleetSettings as FleetSettings, fleet as fleet
-from ._manifest import Drive as Drive, read_manifest as read_manifest
-from ._platform import Platform as Platform
-from ._psis import gpd_fit as gpd_fit, psis as psis
 from ._simulated import (
     TRUE_CHANGES as TRUE_CHANGES,
     TrueChange as TrueChange,

@@ -22,7 +22,8 @@ from ..problem import (
     parameter_names,
     prior_box,
 )
-from ..simulator import LongitudinalMode, Vehicle
+from ..simulator import Vehicle
+from ..simulator.models import LongitudinalMode
 
 #: Longest window of a fleet drive, s: identify's for drives that follow the measured speed.
 MAX_WINDOW = 10.0
@@ -41,7 +42,7 @@ def drive_problem(recording: Path, vehicle: Path) -> Problem:
 def platform_effects(problems: Sequence[Problem]) -> tuple[str, ...]:
     """The effects every drive of the platform gets: the union of `identify`'s defaults
     (`vdsbi.problem.default_effects`) over its drives, in the registry's order."""
-    from ..simulator import EFFECTS
+    from ..simulator.effects import EFFECTS
 
     chosen = {name for p in problems for name, _ in default_effects(p)}
     return tuple(e for e in EFFECTS if e in chosen)

@@ -11,7 +11,7 @@ from pathlib import Path
 import jax
 
 from ..io import InputError, read_vehicle, write_text_atomically
-from ..simulator import SpeedDriven
+from ..simulator.models import SpeedDriven
 from ._amortized import AmortizedSettings, train_estimator
 from ._manifest import Drive
 from ._platform import WINDOW_SECONDS, Platform, drive_problem, make_platform, platform_from_dict

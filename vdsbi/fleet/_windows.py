@@ -23,7 +23,8 @@ from jaxtyping import Array, Bool, Float, PRNGKeyArray
 
 from ..inference import input_channels
 from ..problem import Problem, split_parameters, windowed_model
-from ..simulator import solve, steady_lateral_state
+from ..simulator import solve
+from ..simulator.models import steady_lateral_state
 
 
 @dataclasses.dataclass(frozen=True)

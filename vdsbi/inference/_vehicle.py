@@ -9,7 +9,8 @@ import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..io import InputError, SimulationError
-from ..simulator import PARAM_NAMES, StochasticSimulator
+from ..simulator import PARAM_NAMES
+from ..simulator.measurement import StochasticSimulator
 from ._apt import apt
 from ._apt_state import APTState
 from ._config import NPEConfig

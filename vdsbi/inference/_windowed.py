@@ -10,7 +10,8 @@ import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..problem import Problem, simulate_draws, split_parameters, windowed_model
-from ..simulator import Solver, SpeedDriven
+from ..simulator.models import SpeedDriven
+from ..simulator.solvers import Solver
 from ._apt_state import APTState
 from ._posterior import Posterior
 from ._prior import BoxPrior

@@ -11,7 +11,8 @@ from collections.abc import Iterable
 import numpy as np
 import pandas as pd
 
-from ..simulator import INPUTS, SpeedDriven, TorqueDriven, model_class
+from ..simulator import INPUTS
+from ..simulator.models import SpeedDriven, TorqueDriven, model_class
 from ._errors import InputError
 
 #: Columns every recording has.

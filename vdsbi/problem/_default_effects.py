@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..simulator import SpeedDriven
+from ..simulator.models import SpeedDriven
 from ._problem import Problem, grip_used, top_speed, yaw_at_zero_steer
 
 #: A drive is fast where a tenth of it runs above this, m/s: downforce of a typical race car

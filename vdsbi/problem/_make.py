@@ -13,16 +13,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..io import InputError, Recording
-from ..simulator import (
-    CHANNELS,
+from ..simulator import CHANNELS, Vehicle
+from ..simulator.measurement import Decimator
+from ..simulator.models import (
     LONGITUDINAL_MODES,
     AbstractVehicleModel,
-    Decimator,
     LongitudinalChoice,
     LongitudinalMode,
     SpeedDriven,
     TorqueDriven,
-    Vehicle,
     model_class,
 )
 from ._limit import slides

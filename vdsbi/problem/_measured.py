@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..io import Recording, estimate_speed, forward_speed, running_mean
-from ..simulator import AbstractVehicleModel, SpeedDriven
+from ..simulator.models import AbstractVehicleModel, SpeedDriven
 
 #: Smoothing of the measured ax that loads the tyres and of the yaw rate that starts a window,
 #: s: IMU vibration (several m/s² on real cars) must not move the loads or the start state.

@@ -6,7 +6,8 @@ from collections.abc import Mapping, Sequence
 
 import jax.numpy as jnp
 
-from ..simulator import PARAM_NAMES, PARAM_UNITS, Vehicle, get_effect
+from ..simulator import PARAM_NAMES, PARAM_UNITS, Vehicle
+from ..simulator.effects import get_effect
 
 
 def parameter_names(effects: Sequence[str] = ()) -> tuple[str, ...]:

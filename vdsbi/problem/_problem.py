@@ -16,17 +16,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..simulator import (
-    CHANNELS,
-    GRAVITY,
-    LONGITUDINAL_MODES,
-    Decimator,
-    Inputs,
-    LongitudinalChoice,
-    LongitudinalMode,
-    Vehicle,
-    model_class,
-)
+from ..simulator import CHANNELS, GRAVITY, Inputs, Vehicle
+from ..simulator.measurement import Decimator
+from ..simulator.models import LONGITUDINAL_MODES, LongitudinalChoice, LongitudinalMode, model_class
 from ._windows import Window
 
 #: A problem's samples: the fitted ones, the held-out ones, or every usable one.

@@ -9,16 +9,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, PRNGKeyArray
 
-from ..simulator import (
-    Decimator,
-    Inputs,
-    Solver,
-    VehicleModel,
-    make_model,
-    shard_draws,
-    solve,
-    steady_lateral_state,
-)
+from ..simulator import Inputs, make_model, shard_draws, solve
+from ..simulator.measurement import Decimator
+from ..simulator.models import VehicleModel, steady_lateral_state
+from ..simulator.solvers import Solver
 from ._problem import Problem
 
 

@@ -6,7 +6,9 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from ..simulator import PARAM_NAMES, Solver, effect_params_from
+from ..simulator import PARAM_NAMES
+from ..simulator.effects import effect_params_from
+from ..simulator.solvers import Solver
 from ._problem import Problem
 from ._simulate import simulate_draws, windowed_model
 

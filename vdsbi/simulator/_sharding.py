@@ -5,7 +5,7 @@ batch of draws would leave the other cores idle. When this module is imported be
 started, vdsbi asks JAX for one CPU device per core (at most ``MAX_CPU_DEVICES``) through JAX's
 own option ``jax_num_cpu_devices``, and batches of draws are split over them
 (``benchmarks/simulator.py`` measures the gain). ``VDSBI_CPU_DEVICES=N`` sizes it and ``=1``
-turns it off. Training keeps to the first CPU device (see `vdsbi.inference.data_mesh`). The
+turns it off. Training keeps to the first CPU device (see `data_mesh` in `vdsbi/inference/_sharding.py`). The
 setting is skipped if the user already chose (``jax_num_cpu_devices`` set, or
 ``--xla_force_host_platform_device_count`` in ``XLA_FLAGS``) or JAX already ran something.
 """
