@@ -116,6 +116,13 @@ def _fit_likelihood(prob: Problem, full: Problem, starts, box: Box, effects, say
     one fit when nothing is held out."""
     say("fitting the likelihood posterior on the training part (best fit, model-error noise, Laplace)")
     checked = fit_likelihood(prob, starts, box, effects=effects)
+    if not np.isfinite(checked.chi2_dof):
+        raise InputError(
+            prob.source,
+            "windows",
+            "no start of the likelihood fit simulates this drive; check the time base, units of "
+            "the torques and that the car keeps rolling",
+        )
     if full is prob:
         return checked, checked
     say("refitting on all the usable driving: the estimate and the posterior reported")
