@@ -205,7 +205,7 @@ def main(argv=None) -> dict:
             "prior": {n: [float(lo[i]), float(hi[i])] for i, n in enumerate(PARAM_NAMES)},
             "patience_over_new_data": settings.config.sequential.patience_over_new_data,
             "truncate": settings.truncate,
-            "config": as_record(settings.npe_config),
+            "config": as_record(settings.config),
         },
         "device": f"{jax.devices()[0].platform}:{jax.devices()[0].device_kind}",
         "load_average_at_start": load_start,

@@ -328,3 +328,25 @@ def test_the_prior_sits_at_an_effects_start_and_at_the_least_effect_a_box_allows
     low, high = np.asarray(floored.low)[6:], np.asarray(floored.high)[6:]
     assert np.all(low > 1.0)
     np.testing.assert_allclose(mode[6:], low + 0.05 * (high - low), rtol=1e-6)
+
+
+def test_a_start_that_does_not_simulate_is_an_infinitely_bad_fit_not_a_crash(x64, monkeypatch):
+    import jax.numpy as jnp
+
+    import vdsbi.estimation._likelihood as likelihood
+    from vdsbi.estimation import LeastSquaresResult
+
+    veh = default_vehicle()
+    # A window length no other test here uses: the jitted fit traces afresh, with the stand-in.
+    prob = make_problem(_drive(), veh, ProblemSettings(longitudinal="torque", max_window=5.5))
+    box = Box.from_dict(prior_box(veh), PARAM_NAMES)
+
+    def nowhere(fn, z0, **kw):  # what the solver returns when its start evaluates to NaN
+        r = jnp.full(fn(z0).shape, jnp.nan)
+        jac = jnp.full((*r.shape, *z0.shape), jnp.nan)
+        return LeastSquaresResult(z0, r, jac, jnp.asarray(jnp.inf), jnp.asarray(0), jnp.asarray(False))
+
+    monkeypatch.setattr(likelihood, "levenberg_marquardt", nowhere)
+    post = fit_likelihood(prob, THETA, box, free=("C_alpha_f", "C_alpha_r"), max_steps=5)
+    assert post.chi2_dof == np.inf and not post.converged
+    assert np.all(np.isfinite(post.cov_z)) and np.all(np.isfinite(post.interval(0.9)))

@@ -120,7 +120,7 @@ def test_identify_settings_train_each_embedding_by_its_own_default():
     # round 1 runs a fixed decaying schedule, shorter for the costly CNN
     assert cnn.config.training.cosine_decay and stats.config.training.cosine_decay
     assert cnn.config.training.max_epochs < stats.config.training.max_epochs
-    assert isinstance(cnn.npe_config.flow.x_standardize, TrajectoryStandardization)
+    assert isinstance(cnn.config.flow.x_standardize, TrajectoryStandardization)
     # the CNN's later rounds are capped (bounded Table II time); the cheap statistics' are not
     assert cnn.config.sequential.later_max_epochs is not None
     assert stats.config.sequential.later_max_epochs is None
@@ -128,13 +128,15 @@ def test_identify_settings_train_each_embedding_by_its_own_default():
     # the CNN's spline interval is wider than the default: base draws past ±3 escaped to the box edges
     assert cnn.config.flow.tail_bound > NPEConfig().flow.tail_bound
     mine = NPEConfig(training=TrainingSettings(max_epochs=7))
-    assert IdentifySettings(embedding=TrajectoryCNN(), config=mine).config is mine  # an explicit one is kept
+    kept = IdentifySettings(embedding=TrajectoryCNN(), config=mine)
+    assert kept.config is mine  # an explicit one is kept, its standardisation included
+    assert not isinstance(kept.config.flow.x_standardize, TrajectoryStandardization)
     with pytest.raises(InputError, match="embedding"):
         IdentifySettings(embedding="cnn")
     # the run's record names each typed choice
     assert as_record(stats)["embedding"] == "stats"
-    assert as_record(cnn.npe_config)["flow"]["x_standardize"] == "trajectory"
-    assert as_record(cnn.npe_config)["flow"]["theta_map"] == "logit"
+    assert as_record(cnn.config)["flow"]["x_standardize"] == "trajectory"
+    assert as_record(cnn.config)["flow"]["theta_map"] == "logit"
 
 
 @pytest.mark.slow

@@ -9,7 +9,7 @@ import json
 import os
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -102,11 +102,9 @@ def identify(
         starts = _starts(npe_samples, box, _steer_lag(recs[0], veh))
         checked, fit = _fit_likelihood(prob, full, starts, box, effects, say)
         prob, full = checked.with_fitted_starts(prob), fit.with_fitted_starts(full)
-        kw = dict(vehicle=veh, run_info=run_info, box=box, effects=effects, compare=options.compare)
-        kw |= dict(names=names or (recording, vehicle, out_dir), longitudinal=drive.longitudinal)
-        kw |= dict(num_samples=settings.num_samples, ppc_draws=budget.ppc_draws)
-        keys = (k_val, k_post, k_band)
-        result = _result(keys, prob, full, checked, fit, estimator, npe_samples, state, out, **kw)
+        setup = _Setup(veh, run_info, box, effects, names or (recording, vehicle, out_dir))
+        fitted = _Fitted(prob, full, checked, fit, estimator, npe_samples, state)
+        result = _result((k_val, k_post, k_band), setup, fitted, options, out)
         if out is not None:
             write_outputs(out, result, prob, result.ppc)
     return result
@@ -118,6 +116,13 @@ def _fit_likelihood(prob: Problem, full: Problem, starts, box: Box, effects, say
     one fit when nothing is held out."""
     say("fitting the likelihood posterior on the training part (best fit, model-error noise, Laplace)")
     checked = fit_likelihood(prob, starts, box, effects=effects)
+    if not np.isfinite(checked.chi2_dof):
+        raise InputError(
+            prob.source,
+            "windows",
+            "no start of the likelihood fit simulates this drive; check the time base, units of "
+            "the torques and that the car keeps rolling",
+        )
     if full is prob:
         return checked, checked
     say("refitting on all the usable driving: the estimate and the posterior reported")
@@ -125,32 +130,41 @@ def _fit_likelihood(prob: Problem, full: Problem, starts, box: Box, effects, say
     return checked, fit_likelihood(full, start, box, effects=effects, noise=ModelError(start=checked.noise))
 
 
-def _result(
-    keys,
-    prob,
-    full,
-    checked,
-    fit,
-    estimator,
-    npe_samples,
-    state,
-    out,
-    *,
-    vehicle,
-    run_info,
-    box,
-    effects,
-    compare,
-    names,
-    longitudinal,
-    num_samples,
-    ppc_draws,
-) -> IdentifyResult:
+class _Setup(NamedTuple):
+    """What a run was set up with: the car, run.json's record, the prior box, the effects, and
+    the paths as the user knows them (for the commands printed)."""
+
+    vehicle: Any
+    run_info: dict
+    box: Box
+    effects: tuple[str, ...]
+    names: tuple
+
+
+class _Fitted(NamedTuple):
+    """What a run fitted: the validation and the whole problem (start speeds corrected), the
+    likelihood posterior on the training part and on all of it, the neural posterior, its draws
+    and its training state."""
+
+    prob: Problem
+    full: Problem
+    checked: Any
+    fit: Any
+    estimator: Any
+    npe_samples: np.ndarray
+    state: Any
+
+
+def _result(keys, setup: _Setup, fitted: _Fitted, options: IdentifyOptions, out) -> IdentifyResult:
     """The reported posterior's samples and summary, the neural posterior's check, the
     validation on the held-out part with its predictive band, the warnings and the exported
     predictive draws."""
     import jax
 
+    vehicle, run_info, box, effects, names = setup
+    prob, full, checked, fit, estimator, npe_samples, state = fitted
+    num_samples, ppc_draws = options.budget.num_samples, options.budget.ppc_draws
+    compare, longitudinal = options.compare, options.drive.longitudinal
     k_val, k_post, k_band = keys
     samples = np.asarray(fit.sample(k_post, num_samples), float)
     summary = run_summary(full, samples, fit, state, run_info, box, effects, vehicle)

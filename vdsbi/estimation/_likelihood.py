@@ -247,6 +247,20 @@ def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, wid
         res = fit(p, jnp.asarray(std))
         p, converged = res.z, bool(res.converged)
         steps.append(int(res.num_steps))
+        if not np.isfinite(float(res.cost)):
+            # The start itself does not simulate: an infinitely bad fit, said as such.
+            return _failed(
+                data,
+                box,
+                z0,
+                free,
+                mask,
+                NoiseModel(data.channels, scale, tau, sensor, mask.sum() * np.ones_like(scale)),
+                part,
+                k + n_v,
+                mean,
+                steps,
+            )
         resid = np.asarray(res.residual).reshape(*mask.shape, len(scale)) * std
         if not sensor_only:
             measured = measure_noise(resid, mask, sensor, data.channels)
@@ -283,6 +297,29 @@ def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, wid
         resid,
         raw * std[:, None],
         mean,
+    )
+
+
+def _failed(data: Problem, box: Box, z0, free, mask, noise: NoiseModel, part, columns: int, mean, steps):
+    """The posterior of a fit whose start does not simulate: the prior, an infinite residual on
+    the fitted samples (its χ² and evidence infinitely bad), not converged."""
+    prior = np.diag(np.full(len(box.names), PRIOR_Z_STD**2))
+    c = len(data.channels)
+    return LikelihoodPosterior(
+        box,
+        z0,
+        prior,
+        prior.copy(),
+        free,
+        noise,
+        False,
+        tuple(steps),
+        residual=np.where(mask[..., None], np.inf, 0.0) * np.ones(c),
+        jacobian=np.zeros((*mask.shape, c, columns)),
+        part=part,
+        prior_mean=mean,
+        v0_offset=np.zeros(len(data.v0)),
+        curvature=np.diag(np.full(columns - corrected_windows(data), PRIOR_Z_STD**-2)),
     )
 
 

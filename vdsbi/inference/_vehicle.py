@@ -35,7 +35,7 @@ class IdentifySettings:
             al. 2022); False: APT's posterior proposals and atomic loss (Greenberg et al. 2019),
             which on the seed's maneuver can leave much of the posterior in a spurious mode.
         config: flow and training hyperparameters (default: the embedding's
-            ``default_config``), as the embedding adjusts them (`npe_config`). Later rounds
+            ``default_config``; one given is used as given). Later rounds
             wait ``ceil(patience · new/all)`` epochs (``patience_over_new_data``), as for the
             other tasks.
     """
@@ -47,11 +47,6 @@ class IdentifySettings:
     num_samples: int = 1000
     truncate: bool = True
     config: NPEConfig | None = None
-
-    @property
-    def npe_config(self) -> NPEConfig:
-        """`config` as the embedding needs it (`AbstractObservation.npe_config`)."""
-        return self.embedding.npe_config(self.config)
 
     def __post_init__(self):
         if not isinstance(self.embedding, AbstractObservation):
@@ -184,7 +179,7 @@ def fit_posterior(
         embedding=embedding,
         rounds=settings.rounds,
         sims_per_round=settings.sims_per_round,
-        config=settings.npe_config,
+        config=settings.config,
         truncate=settings.truncate,
         on_round_end=on_round_end,
         on_epoch_end=on_epoch_end,

@@ -1,4 +1,9 @@
-"""Physics effects. Adding one: a new module here and one line in EFFECTS."""
+"""Physics effects. Adding one: a new module here, holding one `AbstractEffect` subclass with its
+metadata; the package finds it (`EFFECTS`), and simulation, identification, discovery and export
+take it from there."""
+
+import importlib
+import pkgutil
 
 from ._aero_drag import AeroDrag as AeroDrag
 from ._base import AbstractEffect as AbstractEffect, Context as Context
@@ -68,23 +73,47 @@ def register_effect(cls: type[AbstractEffect]) -> type[AbstractEffect]:
     return cls
 
 
-for _cls in (
-    AeroDrag,
-    RollingResistance,
-    RoadGrade,
-    RoadBank,
-    SteeringLag,
-    TorqueLag,
-    ImuLeverArm,
-    ImuMisalignment,
-    SensorBias,
-    WheelRadiusError,
-    TyreFriction,
-    TorqueGain,
-    SignalDelay,
-    SensorScale,
-    YawInertia,
-    SteerOffset,
-    Downforce,
-):
+#: The built-in effects' search order (discovery tries effects in this order and breaks ties by
+#: it); an effect module not named here comes after them, by effect name.
+SEARCH_ORDER = (
+    "aero_drag",
+    "rolling_resistance",
+    "road_grade",
+    "road_bank",
+    "steering_lag",
+    "torque_lag",
+    "imu_lever_arm",
+    "imu_misalignment",
+    "sensor_bias",
+    "wheel_radius_error",
+    "tyre_friction",
+    "torque_gain",
+    "signal_delay",
+    "sensor_scale",
+    "yaw_inertia",
+    "steer_offset",
+    "downforce",
+)
+
+
+def _effect_classes() -> list[type[AbstractEffect]]:
+    """Every concrete `AbstractEffect` subclass defined in a module of this package."""
+    found = []
+    for info in pkgutil.iter_modules(__path__):
+        if info.name in ("_base", "_missing_terms"):
+            continue
+        module = importlib.import_module(f"{__name__}.{info.name}")
+        for obj in vars(module).values():
+            if (
+                isinstance(obj, type)
+                and issubclass(obj, AbstractEffect)
+                and obj.__module__ == module.__name__
+                and isinstance(obj.__dict__.get("name"), str)
+            ):
+                found.append(obj)
+    rank = {n: i for i, n in enumerate(SEARCH_ORDER)}
+    return sorted(found, key=lambda c: (rank.get(c.name, len(rank)), c.name))
+
+
+for _cls in _effect_classes():
     register_effect(_cls)
