@@ -334,7 +334,7 @@ def test_a_start_that_does_not_simulate_is_an_infinitely_bad_fit_not_a_crash(x64
     import jax.numpy as jnp
 
     import vdsbi.estimation._likelihood as likelihood
-    from vdsbi.estimation import LeastSquaresResult
+    from vdsbi.estimation._least_squares import LeastSquaresResult
 
     veh = default_vehicle()
     # A window length no other test here uses: the jitted fit traces afresh, with the stand-in.

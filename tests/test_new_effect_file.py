@@ -48,8 +48,9 @@ SCRIPT = textwrap.dedent(
     from vdsbi import api
     from vdsbi.discovery import diagnose_mismatch
     from vdsbi.io import build_recording
-    from vdsbi.simulator import CHANNELS, EFFECTS, SEED_TRUE_THETA, default_vehicle, random_profile, simulate
+    from vdsbi.simulator import CHANNELS, SEED_TRUE_THETA, default_vehicle, random_profile, simulate
     from vdsbi.simulator import theta_from_dict
+    from vdsbi.simulator.effects import EFFECTS
 
     out = Path(sys.argv[1])
     noise = {"ax": 0.05, "ay": 0.05, "yaw_rate": 0.003, "omega_front": 0.1, "omega_rear": 0.1}
