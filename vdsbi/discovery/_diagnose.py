@@ -300,16 +300,18 @@ def _conclude(before, decision, base, after, held, terms, test_terms, windows: P
     return found, section, held
 
 
-#: A channel's held-out χ²/dof may grow by this share and the fix still count as an improvement,
-#: if the channels' mean falls; or by two standard deviations of its χ²/dof (the held-out part's
-#: own sampling noise: 2·√(2τ/N) relative, N samples correlated over τ) where that is more.
+#: A fix counts as an improvement where the channels' mean held-out χ²/dof falls by more than this
+#: share, and no channel's grows by more than it; or by more than two standard deviations of the
+#: χ²/dof (the held-out part's own sampling noise: 2·√(2τ/N) relative, N samples correlated over
+#: τ) where that is more. A change within the noise is no fix either way.
 HELD_OUT_SLACK = 0.02
 
 
 def held_out_improves(before: dict, after: dict, tau: dict | None = None) -> bool:
-    """Whether a fix improves the held-out fit: the channels' mean χ²/dof falls and none grows by
-    more than its slack (`HELD_OUT_SLACK`). A fix that trades one channel's fit for another's is
-    not one. `tau`: each channel's residual autocorrelation time (default 1)."""
+    """Whether a fix improves the held-out fit: the channels' mean χ²/dof falls by more than its
+    slack and none grows by more than its own (`HELD_OUT_SLACK`). A fix that trades one channel's
+    fit for another's is not one, nor one that moves it within the noise. `tau`: each channel's
+    residual autocorrelation time (default 1)."""
     tau = tau or {}
 
     def slack(c):
@@ -318,7 +320,9 @@ def held_out_improves(before: dict, after: dict, tau: dict | None = None) -> boo
 
     mean = lambda h: float(np.mean([v["chi2_dof"] for v in h.values()]))
     worse = any(after[c]["chi2_dof"] > (1 + slack(c)) * before[c]["chi2_dof"] for c in before)
-    return bool(mean(after) < mean(before) and not worse)
+    # The mean's own noise: the channels' relative slacks, combined as independent.
+    mean_slack = max(HELD_OUT_SLACK, float(np.sqrt(np.mean([slack(c) ** 2 for c in before]) / len(before))))
+    return bool(mean(after) < (1 - mean_slack) * mean(before) and not worse)
 
 
 def diagnose_mismatch(
