@@ -220,12 +220,15 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="300 simulations, one round; 60 s simulated drives")
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES), metavar="NAME")
     args = ap.parse_args(argv)
-    rows = []
     tag = "_quick" if args.quick else ""
     RESULTS.mkdir(exist_ok=True)
+    path = RESULTS / f"real_loop{tag}.json"
+    # The cases not run now keep their rows (in CASES' order).
+    kept = {r["case"]: r for r in json.loads(path.read_text())} if path.exists() else {}
     for name in args.cases:
         with tempfile.TemporaryDirectory() as tmp:
-            rows.append(run_case(name, args.quick, Path(tmp)))
+            kept[name] = run_case(name, args.quick, Path(tmp))
+        rows = [kept[c] for c in CASES if c in kept]
         # Written as each case finishes: an interrupted run keeps what it measured.
         (RESULTS / f"real_loop{tag}.json").write_text(json.dumps(rows, indent=2, default=float) + "\n")
         (RESULTS / f"real_loop{tag}.md").write_text(markdown(rows))
