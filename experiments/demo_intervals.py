@@ -26,13 +26,16 @@ from scipy.stats import binom
 
 from vdsbi import api
 from vdsbi.api._demo import demo_recording
+from vdsbi.simulator.effects import EFFECTS
 
 RESULTS = Path(__file__).parent / "results"
 
 
 def run_one(seed: int, duration: float, budget: api.Budget, folder: Path) -> dict:
     truth = demo_recording(folder, duration=duration, seed=seed)
-    values = dict(truth["theta"])
+    # An effect the drive does not have (a default, e.g. friction factors) is truly at its null.
+    values = {f"{e}.{p}": v for e, cls in EFFECTS.items() for p, v in zip(cls.param_names, cls.null)}
+    values |= truth["theta"]
     for effect, params in truth["concealed_effect"].items():
         values |= {f"{effect}.{k}": v for k, v in params.items()}
     t0 = time.perf_counter()
