@@ -103,7 +103,7 @@ def markdown(summary: dict, name: str) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="2 drives of 10 s, 1 round of 200 simulations")
-    ap.add_argument("--drives", type=int, default=20)
+    ap.add_argument("--drives", type=int, default=10)
     ap.add_argument("--out", default=str(RESULTS))
     args = ap.parse_args(argv)
     drives_n, duration = (2, 10.0) if args.quick else (args.drives, 20.0)
