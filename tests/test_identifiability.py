@@ -117,6 +117,7 @@ def test_a_combination_whose_draws_near_a_singularity_is_not_determined():
     prior = np.asarray(box.low) + rng.uniform(size=(4000, 6)) * np.asarray(box.width)
     # a posterior tight on everything but a rear stiffness spread from oversteer to understeer
     post = np.tile(np.asarray(box.low + 0.5 * box.width), (4000, 1))
+    post[:, 4] = 16.5 * veh.mass * 9.81 / 2  # a passenger car's front axle, whatever the box allows
     post[:, 5] = np.linspace(0.7, 1.3, 4000) * post[0, 4] * (veh.wheelbase - post[0, 0]) / post[0, 0]
     out = vehicle_combinations(post, names, veh, 30.0, prior, post)
     gain = out["yaw_rate_gain"]
