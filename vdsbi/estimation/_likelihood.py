@@ -242,6 +242,8 @@ def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, wid
     fit = _fitter(wm, data, mask, box64, sizes, z0, start, padded, p_mean, max_steps)
     p, steps = jnp.asarray(np.concatenate([z0[idx], np.zeros(kw - k + n_v)])), []
     sensor_only = isinstance(noise, SensorNoise)
+    # The noise model as it stands (scale and τ are re-measured after each pass).
+    noise_model = lambda: NoiseModel(data.channels, scale, tau, sensor, mask.sum() * np.ones_like(scale))
     for _ in range(passes + 1):
         std = scale * np.sqrt(tau)
         res = fit(p, jnp.asarray(std))
@@ -255,7 +257,7 @@ def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, wid
                 z0,
                 free,
                 mask,
-                NoiseModel(data.channels, scale, tau, sensor, mask.sum() * np.ones_like(scale)),
+                noise_model(),
                 part,
                 k + n_v,
                 mean,
@@ -278,7 +280,6 @@ def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, wid
     cov_info[np.ix_(idx, idx)] = informed
     z_all = z0.copy()
     z_all[idx] = z
-    noise_model = NoiseModel(data.channels, scale, tau, sensor, mask.sum() * np.ones_like(scale))
     disagree = {free[i]: v for i, v in shifts.items()}
     return LikelihoodPosterior(
         box,
@@ -286,7 +287,7 @@ def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, wid
         cov,
         cov_info,
         free,
-        noise_model,
+        noise_model(),
         converged,
         tuple(steps),
         disagree,
