@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     pass
 
 from ..estimation import ModelError, fit_likelihood, screened_sample
-from ..io import InputError, SimulationError, steer_response
+from ..io import InputError, SimulationError
 from ..problem import (
     Box,
     Problem,
@@ -27,8 +27,10 @@ from ..problem import (
     grip_used,
     longitudinal_mode,
     make_problem,
+    measured_steer_lag,
     parameter_names,
     prior_box,
+    steer_lag_index,
 )
 from ..problem.validation import predictive_band
 from ..simulator.models import SpeedDriven, model_class
@@ -99,7 +101,7 @@ def identify(
     with working as out:
         state = None if out is None else _start(out, run_info, resume, say)
         estimator, npe_samples, state = _train(k_id, prob, box, effects, settings, state, out, progress)
-        starts = _starts(npe_samples, box, _steer_lag(recs[0], veh))
+        starts = _starts(npe_samples, box, measured_steer_lag(recs[0], veh))
         checked, fit = _fit_likelihood(prob, full, starts, box, effects, say)
         prob, full = checked.with_fitted_starts(prob), fit.with_fitted_starts(full)
         setup = _Setup(veh, run_info, box, effects, names or (recording, vehicle, out_dir))
@@ -365,17 +367,6 @@ def _train(key, prob: Problem, box: Box, effects, settings, state, out, progress
 STARTS = 31
 
 
-#: The lag parameters a measured steer-to-response lag starts.
-LAG_PARAMETERS = ("signal_delay.delay", "steering_lag.tau")
-
-
-def _steer_lag(rec, vehicle) -> float | None:
-    """The lag, s, at which the yaw rate follows v·steer/L best (what `check` reports), or None."""
-    speed = rec.speed(vehicle.wheel_radius)
-    found = None if speed is None else steer_response(rec, vehicle.wheelbase, speed)
-    return None if found is None else float(found[2])
-
-
 def _starts(npe_samples: np.ndarray, box: Box, lag: float | None = None) -> np.ndarray:
     """Candidate starts of the likelihood fit: the neural posterior's mean and draws (its global
     view of where the data put θ) and the prior centre; with a measured steer-to-response `lag`,
@@ -384,8 +375,8 @@ def _starts(npe_samples: np.ndarray, box: Box, lag: float | None = None) -> np.n
     centre = np.asarray(box.low + 0.5 * box.width)
     mean = npe_samples.mean(0)
     out = [mean[None], centre[None], npe_samples[:STARTS]]
-    lags = [i for i, n in enumerate(box.names) if n in LAG_PARAMETERS]
-    if lag is not None and lag > 0 and lags:
+    lags = steer_lag_index(box.names)
+    if lag is not None and lag > 0 and lags.size:
         lo, hi = np.asarray(box.low), np.asarray(box.high)
         for share in (0.5, 1.0):
             start = mean.copy()

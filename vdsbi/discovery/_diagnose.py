@@ -23,12 +23,20 @@ import numpy as np
 from ..diagnostics import Localisation, MisspecificationTest, locate_mismatch, misspecification_test
 from ..estimation import ModelError
 from ..io import Recording, read_recording, read_vehicle
-from ..problem import Box, Problem, ProblemSettings, default_effects, longitudinal_mode, make_problem
+from ..problem import (
+    Box,
+    Problem,
+    ProblemSettings,
+    default_effects,
+    longitudinal_mode,
+    make_problem,
+    measured_steer_lag,
+)
 from ..runtime import in_background
 from ..simulator import PARAM_NAMES, Vehicle
 from ..simulator.effects import EFFECTS
 from ..simulator.models import SpeedDriven, model_class
-from ._candidates import effect_names, effect_space, label
+from ._candidates import EffectSpace, effect_names, effect_space, label
 from ._data import compared_inputs, held_out_scores
 from ._fit import Fitter
 from ._rank import (
@@ -135,12 +143,30 @@ def _base_effects(windows: Problem, s: DiagnoseSettings) -> tuple[str, ...]:
     return tuple(n for n in EFFECTS if n in names)
 
 
-def _fitters(windows: Problem, s: DiagnoseSettings, base: tuple[str, ...]) -> tuple[Fitter, Fitter]:
+def _fitters(
+    windows: Problem, s: DiagnoseSettings, base: tuple[str, ...], lag: float | None
+) -> tuple[Fitter, Fitter]:
     """The search's fitter (coarse step) and the base/final fits' (fine step), on the
-    training part, over the same effects (the registry's searched ones now, and the base set)."""
-    effects = effect_space(tuple(n for n in EFFECTS if n in {*effect_names(), *base}))
+    training part, over the same effects (the registry's searched ones now, and the base set),
+    their steer-lag parameters started at half the `lag` the recording shows."""
+    effects = _lag_started(effect_space(tuple(n for n in EFFECTS if n in {*effect_names(), *base})), lag)
     coarse = Fitter(windows, dt=s.search_dt, effects=effects)
     return coarse, Fitter(windows, dt=s.final_dt, effects=effects)
+
+
+def _lag_started(effects: EffectSpace, lag: float | None) -> EffectSpace:
+    """`effects` with each steer-lag parameter (`AbstractEffect.steer_lag`) starting at half the
+    measured `lag`, inside its bounds: the measured lag holds the tyres' and the body's own lag
+    too, and a lag of 0.2 s is not reached from the default start by a few local steps."""
+    if lag is None or lag <= 0:
+        return effects
+    start = effects.start.copy()
+    for name, cls in effects.classes.items():
+        for param in cls.steer_lag:
+            i = effects.slices[name].start + cls.param_names.index(param)
+            margin = 0.01 * (effects.hi[i] - effects.lo[i])
+            start[i] = np.clip(0.5 * lag, effects.lo[i] + margin, effects.hi[i] - margin)
+    return dataclasses.replace(effects, start=start)
 
 
 def _fit_base(coarse: Fitter, fitter: Fitter, vehicle: Vehicle, effects, s: DiagnoseSettings, say):
@@ -361,7 +387,7 @@ def diagnose_mismatch(
     names = s.candidate_names()
     with jax.enable_x64(True):
         windows = _cut_windows(recording, vehicle, s, say)
-        found = _find(windows, vehicle, s, names, say)
+        found = _find(windows, vehicle, s, names, measured_steer_lag(recording, vehicle), say)
     report = build_report(recording, windows, s, found, seconds=say.seconds)
     result = DiagnosisResult(
         report=report,
@@ -385,10 +411,13 @@ def diagnose_mismatch(
     return result
 
 
-def _find(windows: Problem, vehicle: Vehicle, s: DiagnoseSettings, names: tuple[str, ...], say) -> Findings:
-    """Every stage after cutting the windows, up to the verdict."""
+def _find(
+    windows: Problem, vehicle: Vehicle, s: DiagnoseSettings, names: tuple[str, ...], lag: float | None, say
+) -> Findings:
+    """Every stage after cutting the windows, up to the verdict; `lag`: the steer-to-response
+    lag the recording shows, s (None: not measured)."""
     start = _base_effects(windows, s)
-    coarse, fitter = _fitters(windows, s, start)
+    coarse, fitter = _fitters(windows, s, start, lag)
     fitted = fitter.problem
     base_c, base = _fit_base(coarse, fitter, vehicle, start, s, say)
     # The held-out comparison's programs compile during the search.

@@ -9,6 +9,7 @@ from . import validation as validation
 from ._box import Box as Box
 from ._concat import concat_problems as concat_problems
 from ._default_effects import default_effects as default_effects
+from ._lag import measured_steer_lag as measured_steer_lag, steer_lag_index as steer_lag_index
 from ._make import longitudinal_mode as longitudinal_mode, make_problem as make_problem
 from ._measured import (
     measured_longitudinal as measured_longitudinal,

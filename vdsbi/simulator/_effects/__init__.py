@@ -57,6 +57,9 @@ def _check_metadata(cls: type[AbstractEffect]) -> None:
             raise ValueError(f"{where}: start of '{p}' ({x0}) must lie strictly inside bounds ({lo}, {hi})")
         if not lo <= t_lo <= t_hi <= hi:
             raise ValueError(f"{where}: typical range of '{p}' must lie inside its bounds")
+    unknown = [p for p in cls.steer_lag if p not in cls.param_names]
+    if unknown:
+        raise ValueError(f"{where}: steer_lag names {unknown}, not among its param_names")
 
 
 def register_effect(cls: type[AbstractEffect]) -> type[AbstractEffect]:

@@ -49,6 +49,8 @@ class AbstractEffect(eqx.Module):
     - `adds_load`: whether `vertical_load` can load the tyres beyond the car's weight
       (default False): the grip a drive used then bounds no friction factor from below.
     - `prior_bounds`: a drive's prior box (default: `bounds` widened to hold `null`).
+    - `steer_lag`: the names of its parameters that are a lag of the car's response behind the
+      logged steer, s (default none): a fit starts them at the lag the recording shows.
 
     `register_effect` checks them. Hooks receive `p`, the effect's parameter vector.
     """
@@ -64,6 +66,7 @@ class AbstractEffect(eqx.Module):
     num_states: ClassVar[int] = 0
     searched: ClassVar[bool] = True
     adds_load: ClassVar[bool] = False
+    steer_lag: ClassVar[tuple[str, ...]] = ()
 
     @classmethod
     def prior_bounds(cls, grip: float | None, extra_load: bool = False) -> tuple[tuple[float, float], ...]:

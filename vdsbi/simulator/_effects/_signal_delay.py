@@ -33,6 +33,7 @@ class SignalDelay(AbstractEffect):
     typical = ((0.02, 0.15),)
     bounds = ((0.01, 0.4),)
     start = (0.04,)
+    steer_lag = ("delay",)
     description = "inputs and measurements out of step by a pure delay (latency of sensors or bus)"
     num_states = 6
 

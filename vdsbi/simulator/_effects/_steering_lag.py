@@ -16,6 +16,7 @@ class SteeringLag(AbstractEffect):
     typical = ((0.03, 0.3),)
     bounds = ((0.005, 0.8),)
     start = (0.04,)
+    steer_lag = ("tau",)
     description = "steering actuator/compliance lag (yaw and ay lag the recorded steer)"
     num_states = 1
 
