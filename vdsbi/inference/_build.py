@@ -65,7 +65,6 @@ def _make(key, prior, embedding, x_shape, settings, theta_standardizer, x_standa
         num_blocks=settings.num_blocks,
         tail_bound=settings.tail_bound,
         use_lu=settings.use_lu,
-        context_gating=settings.context_gating,
         theta_map=settings.theta_map,
         theta_standardizer=theta_standardizer,
         x_standardizer=x_standardizer,

@@ -31,8 +31,6 @@ class SplineFlowSettings:
         tail_bound: spline interval ``[-B, B]`` on the standardised logit (or θ) scale; identity
             outside.
         use_lu: learned LU-linear layer after each coupling layer.
-        context_gating: the context also gates every residual block of the conditioners
-            (nflows' ``ResidualNet``, as in sbi's NSF); off by default.
         theta_map: `LogitMap` (default: the flow lives on the logit of the box, a bijection) or
             `IdentityMap` (on θ itself, as sbi; density cut at the box without renormalising,
             samples by rejection).
@@ -48,7 +46,6 @@ class SplineFlowSettings:
     num_blocks: int = 2
     tail_bound: float = 3.0
     use_lu: bool = True
-    context_gating: bool = False
     theta_map: AbstractThetaMap = LogitMap()
     x_standardize: AbstractStandardization = ChannelStandardization()
 

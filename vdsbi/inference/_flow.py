@@ -30,50 +30,29 @@ _LOG_2PI = math.log(2.0 * math.pi)
 
 
 class _ResidualNet(eqx.Module):
-    """``in -> hidden``, ``num_blocks`` pre-activation residual blocks, ``hidden -> out``.
-
-    With ``context_dim > 0`` the last ``context_dim`` inputs are a context that also gates
-    every block's residual, ``r * sigmoid(W c + b)`` (nflows' ``ResidualNet``, sbi's NSF
-    conditioner); otherwise the context enters through the first layer only.
-    """
+    """``in -> hidden``, ``num_blocks`` pre-activation residual blocks, ``hidden -> out`` (the
+    context enters with the input, through the first layer)."""
 
     first: eqx.nn.Linear
     blocks: tuple[tuple[eqx.nn.Linear, eqx.nn.Linear], ...]
-    gates: tuple[eqx.nn.Linear, ...]
     last: eqx.nn.Linear
-    context_dim: int = eqx.field(static=True)
 
-    def __init__(
-        self,
-        in_dim: int,
-        out_dim: int,
-        hidden: int,
-        num_blocks: int,
-        *,
-        key: PRNGKeyArray,
-        context_dim: int = 0,
-    ):
+    def __init__(self, in_dim: int, out_dim: int, hidden: int, num_blocks: int, *, key: PRNGKeyArray):
         k0, k1, *kb = jax.random.split(key, 2 + 2 * num_blocks)
-        self.context_dim = int(context_dim)
         self.first = eqx.nn.Linear(in_dim, hidden, key=k0)
         self.blocks = tuple(
             (eqx.nn.Linear(hidden, hidden, key=kb[2 * i]), eqx.nn.Linear(hidden, hidden, key=kb[2 * i + 1]))
             for i in range(num_blocks)
         )
-        kg = jax.random.split(jax.random.fold_in(key, 1), num_blocks)  # ungated init unchanged
-        num_gates = num_blocks if context_dim else 0
-        self.gates = tuple(eqx.nn.Linear(context_dim, hidden, key=kg[i]) for i in range(num_gates))
         last = eqx.nn.Linear(hidden, out_dim, key=k1)
         # Near-zero output: every spline starts close to the identity.
         self.last = eqx.tree_at(lambda m: (m.weight, m.bias), last, (last.weight * 1e-2, last.bias * 0.0))
 
     def features(self, h):
         """The last hidden layer (before ``last``)."""
-        c = h[h.shape[0] - self.context_dim :]
         h = self.first(h)
-        for i, (a, b) in enumerate(self.blocks):
-            r = b(jax.nn.relu(a(jax.nn.relu(h))))
-            h = h + (r * jax.nn.sigmoid(self.gates[i](c)) if self.gates else r)
+        for a, b in self.blocks:
+            h = h + b(jax.nn.relu(a(jax.nn.relu(h))))
         return h
 
     def __call__(self, h):
@@ -94,14 +73,11 @@ class _Layer(eqx.Module):
     bound: float = eqx.field(static=True)
     use_lu: bool = eqx.field(static=True)
 
-    def __init__(self, mask, context_dim, *, dim, num_bins, hidden, num_blocks, bound, use_lu, gating, key):
+    def __init__(self, mask, context_dim, *, dim, num_bins, hidden, num_blocks, bound, use_lu, key):
         self.mask = mask
         self.dim, self.num_bins, self.bound, self.use_lu = dim, num_bins, bound, use_lu
         out = dim * num_spline_params(num_bins)
-        gate_dim = context_dim if gating else 0
-        self.conditioner = _ResidualNet(
-            dim + context_dim, out, hidden, num_blocks, key=key, context_dim=gate_dim
-        )
+        self.conditioner = _ResidualNet(dim + context_dim, out, hidden, num_blocks, key=key)
         self.lower = jnp.zeros((dim, dim))
         self.upper = jnp.zeros((dim, dim))
         self.diag_raw = jnp.full((dim,), math.log(math.expm1(1.0 - 1e-3)), dtype=self.lower.dtype)
@@ -188,8 +164,6 @@ class ConditionalFlow(AbstractEstimator):
         embedding: maps one standardised x to a context vector of length ``embedding.out_dim``.
         x_shape: shape of ONE observation.
         num_layers, num_bins, hidden, num_blocks, tail_bound, use_lu: architecture.
-        context_gating: the context also gates every residual block of the conditioners
-            (as nflows/sbi's NSF); default False (context through the first layer only).
         theta_standardizer: affine map in the unbounded (logit, or θ) space, shape ``(d,)``.
         theta_map: `LogitMap` (box → R^d bijection) or `IdentityMap` (flow on θ itself; sbi's
             choice: a thin curved posterior is not bent further by the logit).
@@ -209,7 +183,6 @@ class ConditionalFlow(AbstractEstimator):
     num_blocks: int = eqx.field(static=True)
     tail_bound: float = eqx.field(static=True)
     use_lu: bool = eqx.field(static=True)
-    context_gating: bool = eqx.field(static=True)
     theta_map: AbstractThetaMap
 
     def __init__(
@@ -225,7 +198,6 @@ class ConditionalFlow(AbstractEstimator):
         num_blocks: int = 2,
         tail_bound: float = 3.0,
         use_lu: bool = True,
-        context_gating: bool = False,
         theta_map: AbstractThetaMap = LogitMap(),
         theta_standardizer: Standardizer | None = None,
         x_standardizer: Standardizer | None = None,
@@ -234,7 +206,6 @@ class ConditionalFlow(AbstractEstimator):
         self.x_shape = tuple(int(s) for s in x_shape)
         self.num_layers, self.num_bins, self.hidden = int(num_layers), int(num_bins), int(hidden)
         self.num_blocks, self.tail_bound, self.use_lu = int(num_blocks), float(tail_bound), bool(use_lu)
-        self.context_gating = bool(context_gating)
         if not isinstance(theta_map, AbstractThetaMap):
             raise TypeError(f"theta_map must be a LogitMap or an IdentityMap, got {theta_map!r}")
         self.theta_map = theta_map
@@ -249,7 +220,6 @@ class ConditionalFlow(AbstractEstimator):
             num_blocks=self.num_blocks,
             bound=self.tail_bound,
             use_lu=self.use_lu,
-            gating=self.context_gating,
         )
         keys = jax.random.split(key, self.num_layers)
         masks = _masks(self.num_layers, self.dim)
@@ -320,7 +290,6 @@ class ConditionalFlow(AbstractEstimator):
             "num_blocks": self.num_blocks,
             "tail_bound": self.tail_bound,
             "use_lu": self.use_lu,
-            "context_gating": self.context_gating,
         }
 
 
@@ -338,7 +307,6 @@ def flow_from_spec(spec: dict[str, Any]) -> ConditionalFlow:
         num_blocks=spec["num_blocks"],
         tail_bound=spec["tail_bound"],
         use_lu=spec["use_lu"],
-        context_gating=spec.get("context_gating", False),  # absent in older files
         theta_map=theta_map_from_name(spec.get("theta_map", "logit")),
         x_standardizer=xstd,
     )
