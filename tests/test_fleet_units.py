@@ -1,6 +1,8 @@
 """The fleet's pieces on known cases: Pareto-smoothed importance sampling's k̂, the sequential test
 per car and parameter, the manifest's errors."""
 
+import time
+
 import numpy as np
 import pytest
 
@@ -152,3 +154,26 @@ def test_cluster_by_address_sets_up_its_workers(tmp_path):
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, dashboard_address=None) as existing:
         with open_client(Cluster(address=existing.scheduler_address, compilation_cache=tmp_path)) as client:
             assert client.submit(cache_dir, pure=False).result() == str(tmp_path)
+
+
+def test_a_local_cluster_left_without_workers_gives_up_its_drives(monkeypatch):
+    """Every worker gone and none restarted: the run says so and returns the drives unanswered
+    (a re-run retries them) instead of waiting for ever."""
+    distributed = pytest.importorskip("distributed")
+
+    from vdsbi.fleet import Cluster
+    from vdsbi.fleet import _fleet
+
+    monkeypatch.setattr(_fleet, "WORKER_CHECK_S", 0.2)
+    monkeypatch.setattr(_fleet, "NO_WORKERS_S", 1.0)
+    lines = []
+    with distributed.LocalCluster(n_workers=1, processes=False, dashboard_address=None) as cluster:
+        with distributed.Client(cluster) as client:
+            quick = client.submit(lambda: 1, pure=False)
+            assert list(_fleet._finished(client, {quick: "a"}, Cluster(), lines.append)) == [quick]
+            cluster.scale(0)
+            while client.scheduler_info()["workers"]:
+                time.sleep(0.05)
+            stuck = client.submit(lambda: 2, pure=False)
+            assert list(_fleet._finished(client, {stuck: "b"}, Cluster(), lines.append)) == []
+    assert "no workers" in lines[-1] and "1 drives not answered" in lines[-1]

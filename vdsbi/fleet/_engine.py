@@ -20,6 +20,16 @@ from pathlib import Path
 SINGLE_THREAD_FLAGS = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
 #: Deaths of the worker running a drive before that drive is given up (this run; a re-run retries).
 ALLOWED_FAILURES = 3
+#: The engine's settings. A worker's memory is JAX's, not Dask's: spilling has nothing to spill
+#: and pausing a worker stalls its drive for good, so only a runaway worker is restarted (its
+#: drive retried).
+DASK_CONFIG = {
+    "distributed.scheduler.allowed-failures": ALLOWED_FAILURES,
+    "distributed.worker.memory.target": False,
+    "distributed.worker.memory.spill": False,
+    "distributed.worker.memory.pause": False,
+    "distributed.worker.memory.terminate": 0.95,
+}
 #: Size limit of the persistent compilation cache.
 CACHE_MAX_BYTES = 2 * 1024**3
 
@@ -77,7 +87,7 @@ def open_client(cluster: Cluster) -> Iterator:
     from distributed import Client, LocalCluster
 
     folder = None if cluster.compilation_cache is None else str(cluster.compilation_cache)
-    with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
+    with dask.config.set(DASK_CONFIG):
         if cluster.address is not None:
             client = Client(cluster.address)
             local = None

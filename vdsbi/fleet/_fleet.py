@@ -125,8 +125,6 @@ def fleet(
 def _run(todo, drives, out, settings, cluster, retrain, estimates, say) -> int:
     """Submit each platform's preparation, then its drives (which wait for it); write each drive's
     rows as it finishes."""
-    from distributed import as_completed
-
     by_vehicle: dict[Path, list[Drive]] = {}
     for d in drives:
         by_vehicle.setdefault(d.vehicle, []).append(d)
@@ -162,7 +160,7 @@ def _run(todo, drives, out, settings, cluster, retrain, estimates, say) -> int:
             for d in todo
         }
         n, t0 = 0, time.perf_counter()
-        for future in as_completed(futures):
+        for future in _finished(client, futures, cluster, say):
             d = futures[future]
             n += 1
             try:
@@ -182,6 +180,42 @@ def _run(todo, drives, out, settings, cluster, retrain, estimates, say) -> int:
                 + (f": {record['error']}" if record["method"] == "failed" else "")
             )
     return n
+
+
+#: How often, s, a run waiting for its drives checks that the cluster still has workers.
+WORKER_CHECK_S = 30.0
+#: How long, s, a local cluster may have no workers before the drives left are given up.
+NO_WORKERS_S = 180.0
+
+
+def _finished(client, futures, cluster: Cluster, say):
+    """The futures as they finish. A local cluster left without workers (every worker process
+    gone, none restarted) gives up the drives left after `NO_WORKERS_S`, saying so, rather than
+    wait forever; a cluster joined by address may get workers back, so it is waited for."""
+    from distributed import wait
+
+    pending, since = set(futures), None
+    while pending:
+        try:
+            done = wait(pending, timeout=WORKER_CHECK_S, return_when="FIRST_COMPLETED").done
+        except TimeoutError:
+            done = set()
+        yield from done
+        pending -= done
+        if done or client.scheduler_info().get("workers"):
+            since = None
+            continue
+        since = since or time.perf_counter()
+        waited = time.perf_counter() - since
+        if cluster.address is None and waited > NO_WORKERS_S:
+            say(
+                f"the local cluster has had no workers for {waited:.0f} s: {len(pending)} drives "
+                "not answered; a re-run retries them"
+            )
+            client.cancel(list(pending))
+            return
+        if waited >= WORKER_CHECK_S:
+            say(f"no workers for {waited:.0f} s; {len(pending)} drives waiting")
 
 
 def _k_text(record: dict) -> str:
