@@ -239,7 +239,10 @@ def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, wid
     n_v = corrected_windows(data)
     mean = prior_mean(box, wm.model.effects)
     p_mean = np.concatenate([mean[idx], np.zeros(kw - k + n_v)])
-    fit = _fitter(wm, data, mask, box64, sizes, z0, start, padded, p_mean, max_steps)
+    coords = _Coordinates(
+        box64, jnp.asarray(z0), jnp.asarray(start, jnp.float64), jnp.asarray(padded), tuple(sizes)
+    )
+    fit = _fitter(wm, data, mask, coords, p_mean, max_steps)
     p, steps = jnp.asarray(np.concatenate([z0[idx], np.zeros(kw - k + n_v)])), []
     sensor_only = isinstance(noise, SensorNoise)
     # The noise model as it stands (scale and τ are re-measured after each pass).
@@ -251,18 +254,7 @@ def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, wid
         steps.append(int(res.num_steps))
         if not np.isfinite(float(res.cost)):
             # The start itself does not simulate: an infinitely bad fit, said as such.
-            return _failed(
-                data,
-                box,
-                z0,
-                free,
-                mask,
-                noise_model(),
-                part,
-                k + n_v,
-                mean,
-                steps,
-            )
+            return _failed(data, box, z0, free, part, noise_model(), mean, steps)
         resid = np.asarray(res.residual).reshape(*mask.shape, len(scale)) * std
         if not sensor_only:
             measured = measure_noise(resid, mask, sensor, data.channels)
@@ -301,11 +293,12 @@ def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, wid
     )
 
 
-def _failed(data: Problem, box: Box, z0, free, mask, noise: NoiseModel, part, columns: int, mean, steps):
+def _failed(data: Problem, box: Box, z0, free, part: Part, noise: NoiseModel, mean, steps):
     """The posterior of a fit whose start does not simulate: the prior, an infinite residual on
     the fitted samples (its χ² and evidence infinitely bad), not converged."""
     prior = np.diag(np.full(len(box.names), PRIOR_Z_STD**2))
-    c = len(data.channels)
+    c, columns = len(data.channels), len(free) + corrected_windows(data)
+    mask = np.asarray(data.part(part))
     return LikelihoodPosterior(
         box,
         z0,
@@ -407,25 +400,42 @@ def _best_start(wm, data: Problem, mask, starts: np.ndarray, sizes, scale: np.nd
     return starts[int(np.argmin(np.nan_to_num(cost, nan=np.inf)))]
 
 
-def _residual(wm, y, mask, box: Box, sizes, z0, start, idx, p, std):
+class _Coordinates(eqx.Module):
+    """Where a fit moves: the free logit coordinates `idx` (padded past the end to a common
+    width) of the box's parameters, the others held exactly at `start`; `z0` the start in logit
+    coordinates, `sizes` the model's effects' parameter counts."""
+
+    box: Box
+    z0: Float[Array, " P"]
+    start: Float[Array, " P"]
+    idx: Array
+    sizes: tuple[int, ...] = eqx.field(static=True)
+
+    def values(self, p):
+        """(θ, effect parameters) at p's free coordinates."""
+        k = self.idx.shape[0]
+        z = self.z0.at[self.idx].set(p[:k], mode="drop")
+        is_free = jnp.zeros(self.z0.shape[0], bool).at[self.idx].set(True, mode="drop")
+        return split_values(jnp.where(is_free, self.box.from_unbounded(z), self.start), self.sizes)
+
+
+def _residual(wm, y, mask, coords: _Coordinates, p, std):
     """Whitened residual at p = [free logit coordinates (padded), start-speed corrections (W or
-    none)]; the parameters not free sit exactly at `start`."""
-    k = idx.shape[0]
-    z = z0.at[idx].set(p[:k], mode="drop")
-    is_free = jnp.zeros(z0.shape[0], bool).at[idx].set(True, mode="drop")
-    theta, effect_params = split_values(jnp.where(is_free, box.from_unbounded(z), start), sizes)
+    none)]."""
+    k = coords.idx.shape[0]
+    theta, effect_params = coords.values(p)
     pred, _ = wm(theta, effect_params, v0=wm.v0 + p[k:] if p.shape[0] > k else None)
     return jnp.where(mask[..., None], (pred - y) / std, 0.0).ravel()
 
 
 @eqx.filter_jit
-def _lm(wm, y, mask, box: Box, sizes, z0, start, idx, p, mean, std, max_steps):
+def _lm(wm, y, mask, coords: _Coordinates, p, mean, std, max_steps):
     """One Levenberg–Marquardt fit of the free coordinates and start-speed corrections for given
     per-channel stds; a module-level jit, so every fit of the same shapes (the reweighting passes,
     the refit, every candidate of a search) compiles once."""
-    k = idx.shape[0]
+    k = coords.idx.shape[0]
     prec = jnp.concatenate([jnp.full(k, PRIOR_Z_STD**-2), jnp.full(p.shape[0] - k, V0_STD**-2)])
-    fn = lambda q: _residual(wm, y, mask, box, sizes, z0, start, idx, q, std)
+    fn = lambda q: _residual(wm, y, mask, coords, q, std)
     return levenberg_marquardt(
         fn,
         p,
@@ -438,10 +448,8 @@ def _lm(wm, y, mask, box: Box, sizes, z0, start, idx, p, mean, std, max_steps):
     )
 
 
-def _fitter(wm, data: Problem, mask, box: Box, sizes, z0, start, idx, mean, max_steps):
+def _fitter(wm, data: Problem, mask, coords: _Coordinates, mean, max_steps):
     """The fit of the free coordinates as a function of (start, per-channel stds)."""
-    y, m = jnp.asarray(data.y), jnp.asarray(mask)
-    steps = jnp.asarray(max_steps)
-    z0, start, idx = jnp.asarray(z0), jnp.asarray(start, jnp.float64), jnp.asarray(idx)
+    y, m, steps = jnp.asarray(data.y), jnp.asarray(mask), jnp.asarray(max_steps)
     mean = jnp.asarray(mean, jnp.float64)
-    return lambda p, std: _lm(wm, y, m, box, tuple(sizes), z0, start, idx, p, mean, std, steps)
+    return lambda p, std: _lm(wm, y, m, coords, p, mean, std, steps)
