@@ -7,6 +7,7 @@ import shlex
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+from ..problem import parameter_name
 from ..simulator.models import LongitudinalChoice
 
 
@@ -77,5 +78,5 @@ def measured_priors(
             v, sd = float(values[e][p]), float(stds.get(e, {}).get(p, 0.0))
             half = max(PRIOR_STDS * sd, PRIOR_FRACTION * abs(v), 1e-6 * (b_hi - b_lo))
             lo, hi = max(v - half, min(b_lo, null)), min(v + half, max(b_hi, null))
-            out[f"{e}.{p}"] = (lo, hi)
+            out[parameter_name(e, p)] = (lo, hi)
     return out

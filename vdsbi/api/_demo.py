@@ -13,6 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ..io import output_dir
+from ..problem import parameter_name
 from ..runtime import in_background
 from ._commands import measured_priors
 from ._diagnose import diagnose
@@ -254,7 +255,7 @@ def true_values(truth: dict) -> dict[str, float]:
     """The truth by parameter name: θ and the concealed effects' parameters (``sensor_bias.ax``)."""
     out = dict(truth["theta"])
     for e, params in truth["concealed_effect"].items():
-        out |= {f"{e}.{k}": float(v) for k, v in params.items()}
+        out |= {parameter_name(e, k): float(v) for k, v in params.items()}
     return out
 
 

@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 
 from ..io import InputError, read_recording
-from ..problem import ProblemSettings, make_problem
+from ..problem import ProblemSettings, make_problem, parameter_name
 from ..problem.validation import band_coverage, channel_scores, predict as predict_problem, predictive_band
 from ..simulator import Vehicle
 from ..simulator.effects import get_effect
@@ -104,5 +104,5 @@ def predict(
 
 
 def _effect_values(values: np.ndarray, names: list[str], effects) -> dict:
-    value = lambda e, p: float(values[names.index(f"{e}.{p}")])
+    value = lambda e, p: float(values[names.index(parameter_name(e, p))])
     return {e: {p: value(e, p) for p in get_effect(e).param_names} for e in effects}

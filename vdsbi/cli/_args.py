@@ -11,6 +11,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 from ..io import InputError
+from ..problem import parameter_name
 from ..simulator import PARAM_NAMES
 from ..simulator.effects import EFFECTS
 
@@ -78,9 +79,9 @@ def effects(text: str | None, flag: str = "--effects") -> tuple[list[str], dict[
         for p, v in params.items():
             if p not in cls.param_names:
                 raise InputError(
-                    flag, f"{name}.{p}", f"unknown parameter; '{name}' has {list(cls.param_names)}"
+                    flag, parameter_name(name, p), f"unknown parameter; '{name}' has {list(cls.param_names)}"
                 )
-            clean[p] = number(v, flag, f"{name}.{p}")
+            clean[p] = number(v, flag, parameter_name(name, p))
         names.append(name)
         values[name] = clean
     return names, values

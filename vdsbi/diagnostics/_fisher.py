@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int, PRNGKeyArray
 
+from ..problem import parameter_names
 from ..simulator import CHANNELS, NOMINAL_THETA, PARAM_NAMES, SEED_CHANNELS, Inputs, solve
 from ..simulator.measurement import SensorNoise
 from ..simulator.models import AbstractVehicleModel
@@ -135,10 +136,7 @@ def score_fisher_mc(
 
 def param_names(model: AbstractVehicleModel) -> tuple[str, ...]:
     """θ names then `effect.param` for every enabled effect, in the flat-vector order."""
-    names = list(PARAM_NAMES)
-    for e in model.effects:
-        names += [f"{e.name}.{p}" for p in e.param_names]
-    return tuple(names)
+    return parameter_names(model.effects)
 
 
 def param_scale(model: AbstractVehicleModel, values: Float[Array, " P"]) -> np.ndarray:

@@ -25,7 +25,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..estimation import ModelError, SensorNoise, fit_likelihood
-from ..problem import Box, Problem, WindowedModel, windowed_model
+from ..problem import Box, Problem, WindowedModel, parameter_names, windowed_model
 from ..simulator import PARAM_NAMES, Vehicle, make_model
 from ..simulator.effects import EFFECTS
 from ..simulator.models import AbstractVehicleModel, LongitudinalMode, model_class
@@ -77,7 +77,7 @@ class Space(eqx.Module):
 
 
 def make_space(vehicle: Vehicle, effects: EffectSpace) -> Space:
-    names = tuple(f"{e}.{p}" for e in effects.names for p in effects.classes[e].param_names)
+    names = parameter_names([effects.classes[e] for e in effects.names])[len(PARAM_NAMES) :]
     return Space(
         theta=Box.from_dict(vehicle.default_prior(), PARAM_NAMES),
         effects=Box(jnp.asarray(effects.lo), jnp.asarray(effects.hi), names),

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from ..diagnostics import Localisation, MisspecificationTest
-from ..problem import Problem
+from ..problem import Problem, parameter_name
 from ..simulator import PARAM_NAMES
 from ._candidates import label
 from ._data import held_out_from
@@ -55,7 +55,7 @@ def _at_bounds(fit: DiscoveryFit, fitter: Fitter, frac: float = 0.01) -> list[st
     for e, d in fit.effect_params.items():
         for (k, v), (a, b) in zip(d.items(), fitter.effects.classes[e].bounds):
             if min(v - a, b - v) < frac * (b - a):
-                out.append(f"{e}.{k}")
+                out.append(parameter_name(e, k))
     return out
 
 

@@ -354,9 +354,9 @@ def prior_mean(box: Box, effects: Sequence) -> np.ndarray:
     )
     if len(starts) != len(box.names):
         raise ValueError(f"{len(starts)} starts for a box over {len(box.names)} parameters")
-    u = (starts - np.asarray(box.low, float)) / np.asarray(box.width, float)
-    u = np.where(np.isfinite(u), np.clip(u, MODE_MARGIN, 1.0 - MODE_MARGIN), 0.5)
-    return np.log(u) - np.log1p(-u)
+    low, width = np.asarray(box.low, float), np.asarray(box.width, float)
+    u = np.where(np.isfinite(starts), np.clip((starts - low) / width, MODE_MARGIN, 1.0 - MODE_MARGIN), 0.5)
+    return np.asarray(box.to_unbounded(low + u * width), float)
 
 
 def split_values(values, sizes: Sequence[int]) -> tuple:

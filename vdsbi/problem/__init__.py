@@ -20,6 +20,7 @@ from ._noise import (
     integrated_autocorrelation_time as integrated_autocorrelation_time,
 )
 from ._parameters import (
+    parameter_name as parameter_name,
     parameter_names as parameter_names,
     parameter_units as parameter_units,
     prior_box as prior_box,

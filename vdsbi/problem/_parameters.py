@@ -10,17 +10,30 @@ from ..simulator import PARAM_NAMES, PARAM_UNITS, Vehicle
 from ..simulator.effects import get_effect
 
 
-def parameter_names(effects: Sequence[str] = ()) -> tuple[str, ...]:
-    """PARAM_NAMES, then ``effect.param`` for each parameter of each effect."""
-    extra = [f"{e}.{p}" for e in effects for p in get_effect(e).param_names]
-    return (*PARAM_NAMES, *extra)
+def parameter_name(effect: str, param: str) -> str:
+    """The flat name of an effect's parameter, ``signal_delay.delay``: how files, reports and the
+    command line name it."""
+    return f"{effect}.{param}"
 
 
-def parameter_units(effects: Sequence[str] = ()) -> dict[str, str]:
+def _effect(effect):
+    """An effect's class from its registered name, its class or an instance."""
+    if isinstance(effect, str):
+        return get_effect(effect)
+    return effect if isinstance(effect, type) else type(effect)
+
+
+def parameter_names(effects: Sequence = ()) -> tuple[str, ...]:
+    """PARAM_NAMES, then ``effect.param`` for each parameter of each effect (a registered name,
+    an effect class or an instance), in the flat vector's order."""
+    classes = [_effect(e) for e in effects]
+    return (*PARAM_NAMES, *(parameter_name(c.name, p) for c in classes for p in c.param_names))
+
+
+def parameter_units(effects: Sequence = ()) -> dict[str, str]:
     out = dict(PARAM_UNITS)
-    for e in effects:
-        eff = get_effect(e)
-        out |= {f"{e}.{p}": u for p, u in zip(eff.param_names, eff.units)}
+    for c in map(_effect, effects):
+        out |= {parameter_name(c.name, p): u for p, u in zip(c.param_names, c.units)}
     return out
 
 
@@ -48,7 +61,7 @@ def prior_box(
     for e, eff in effs.items():
         extra_load = any(other.adds_load for name, other in effs.items() if name != e)
         for p, bounds in zip(eff.param_names, eff.prior_bounds(grip, extra_load)):
-            name = f"{e}.{p}"
+            name = parameter_name(e, p)
             box[name] = tuple(float(v) for v in vehicle.prior.get(name, bounds))
     for name, (lo, hi) in (overrides or {}).items():
         if name not in box:
