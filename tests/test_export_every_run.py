@@ -16,7 +16,7 @@ import yaml
 
 from vdsbi.api._held_out import held_out_verdict
 from vdsbi.cli import main
-from vdsbi.diagnostics import held_by_box, trading_pairs
+from vdsbi.diagnostics import held_by_box, ridge_sentence, trading_pairs
 
 
 def _cov(std, rho):
@@ -45,6 +45,28 @@ def test_a_correlated_pair_each_pinned_far_inside_its_prior_does_not_trade():
     # l_f and C_αr on a clean drive: correlated, but each at a few per cent of its prior std.
     pair = trading_pairs(_cov([0.1, 0.01], 0.97), ["l_f", "C_alpha_r"], np.array([0.02, 300.0]))
     assert pair == []
+
+
+def test_three_that_trade_where_no_two_do_are_reported_as_a_group():
+    # Two friction factors and the downforce set a fast corner's grip: f + r + d fixed, no two
+    # correlated beyond 0.71; a fourth parameter stands apart.
+    names = ["tyre_friction.front", "tyre_friction.rear", "downforce.coef", "l_f"]
+    mix = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-1.0, -1.0, 0.1]])
+    cov = np.zeros((4, 4))
+    cov[:3, :3] = mix @ mix.T
+    cov[3, 3] = 1.0
+    step = np.sqrt(np.diag(cov))
+    corr = cov / np.outer(step, step)
+    assert np.max(np.abs(corr[np.triu_indices(4, 1)])) < 0.9  # the pair rule alone finds nothing
+    (group,) = trading_pairs(cov, names, step, prior_std=1.0)
+    assert group["pair"] == names[:3] and group["correlation"] > 0.99
+    d = group["direction"]
+    # along the ridge the sum barely moves, each member by about its share of the posterior
+    assert abs(d[names[0]] + d[names[1]] + d[names[2]]) < 0.05 * abs(d[names[2]])
+    assert ridge_sentence(group).startswith("tyre_friction.front, tyre_friction.rear and downforce.coef trade")
+    # a pair that trades is still reported as a pair, and a member of it is not grouped again
+    (pair,) = trading_pairs(_cov([1.0, 2.0, 0.3], 0.95), names[:3], np.ones(3))
+    assert len(pair["pair"]) == 2
 
 
 def test_a_bound_does_not_hide_a_ridge():
@@ -84,6 +106,10 @@ def test_the_box_and_the_ridge_take_identified_away_and_say_why():
     assert params["a"]["trades_with"] == ["b"] and params["b"]["trades_with"] == ["a"]
     assert params["c"]["identified"] is False and "upper bound" in params["c"]["not_identified_because"]
     assert params["d"]["identified"] is True and "not_identified_because" not in params["d"]
+    group = [{"pair": ["a", "c", "d"], "correlation": 0.97, "direction": {"a": 0.1, "c": 0.1, "d": -0.1}}]
+    _flag_box_and_ridges(params, box, group)
+    assert params["d"]["identified"] is False and params["d"]["trades_with"] == ["a", "c"]
+    assert params["d"]["not_identified_because"] == "trades with a and c along a ridge (R = +0.97)"
 
 
 def _validation(ay: float, yaw: float, npe: float = 0.3) -> dict:

@@ -28,6 +28,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
+from ..diagnostics import ridge_sentence
 from ..io import InputError
 from ._held_out import HeldOutVerdict, held_out_verdict
 
@@ -250,11 +251,10 @@ def _combination_notes(post: Mapping[str, Any]) -> list[str]:
         )
     units = {n: p["unit"] for n, p in post["parameters"].items()}
     for pair in comb.get("trading_pairs", []):
-        a, b = pair["pair"]
-        step = " with ".join(f"{pair['direction'][n]:+.4g} {units.get(n, '')} of {n}" for n in (a, b))
+        step = " with ".join(f"{pair['direction'][n]:+.4g} {units.get(n, '')} of {n}" for n in pair["pair"])
         notes.append(
-            f"#   {a} and {b} trade along a ridge (ρ = {pair['correlation']:+.2f}): {step} leaves the fit "
-            "about unchanged; the drive determines them together, not each alone"
+            f"#   {ridge_sentence(pair)}: {step} leaves the fit about unchanged; the drive determines "
+            "them together, not each alone"
         )
     return ["# What the drive determines (steady state, single-track model):", *notes] if notes else []
 

@@ -130,11 +130,15 @@ def _flag_box_and_ridges(params: dict, box: Box, pairs) -> None:
             why = held_by_box(p["estimate"], p["q05"], p["q95"], float(box.low[i]), float(box.high[i]))
             _not_identified(p, why)
     for pair in pairs:
-        a, b = pair["pair"]
-        rho = pair["correlation"]
-        for me, other in ((a, b), (b, a)):
-            params[me].setdefault("trades_with", []).append(other)
-            _not_identified(params[me], [f"trades with {other} along a ridge (ρ = {rho:+.2f})"])
+        members = pair["pair"]
+        mark = "ρ" if len(members) == 2 else "R"
+        for me in members:
+            others = [n for n in members if n != me]
+            params[me].setdefault("trades_with", []).extend(others)
+            _not_identified(
+                params[me],
+                [f"trades with {' and '.join(others)} along a ridge ({mark} = {pair['correlation']:+.2f})"],
+            )
 
 
 def _not_identified(p: dict, reasons) -> None:

@@ -11,6 +11,8 @@ from typing import Any
 
 import numpy as np
 
+from ..diagnostics import ridge_sentence
+
 
 @dataclasses.dataclass
 class IdentifyResult:
@@ -91,11 +93,7 @@ class IdentifyResult:
                 f"[95 %: {c['q025']:.4g} .. {c['q975']:.4g}]{told}"
             )
         for pair in combinations.get("trading_pairs", ()):
-            a, b = pair["pair"]
-            rows.append(
-                f"{a} and {b} trade along a ridge (ρ = {pair['correlation']:+.2f}): "
-                "the drive determines them together, not each alone"
-            )
+            rows.append(f"{ridge_sentence(pair)}: the drive determines them together, not each alone")
         rows += [f"WARNING: {w['message']}" for w in self.summary.get("warnings", ())]
         return "\n".join(rows)
 

@@ -9,6 +9,7 @@ from typing import Any
 
 from scipy.stats import binom
 
+from ..diagnostics import ridge_sentence
 from ..simulator import PARAM_UNITS
 from . import _html as H
 from ._export import identified_status
@@ -77,15 +78,14 @@ def trading_pair_lines(summary: Mapping[str, Any]) -> list[str]:
     params = summary["parameters"]
     lines = []
     for pair in (summary.get("combinations") or {}).get("trading_pairs", []):
-        a, b = pair["pair"]
         step = " with ".join(
             f"{pair['direction'][n] * display_unit(params[n]['unit'])[0]:+.3g} "
             f"{display_unit(params[n]['unit'])[1]} of {n}"
-            for n in (a, b)
+            for n in pair["pair"]
         )
         lines.append(
-            f"{a} and {b} trade along a ridge (ρ = {pair['correlation']:+.2f}): {step} leaves the fit "
-            "about unchanged. The drive determines them together, not each alone."
+            f"{ridge_sentence(pair)}: {step} leaves the fit about unchanged. The drive determines "
+            "them together, not each alone."
         )
     return lines
 

@@ -29,4 +29,4 @@ from ._misspecification import (
     locate_mismatch as locate_mismatch,
     misspecification_test as misspecification_test,
 )
-from ._ridges import trading_pairs as trading_pairs
+from ._ridges import ridge_sentence as ridge_sentence, trading_pairs as trading_pairs

@@ -1,5 +1,5 @@
-"""Pairs of parameters that trade along a ridge of the likelihood: the drive determines a
-combination of the two, not each alone.
+"""Pairs (and larger groups) of parameters that trade along a ridge of the likelihood: the drive
+determines a combination of them, not each alone.
 
 A steering lag and the yaw-inertia index both slow the yaw response; a friction factor and a
 cornering stiffness both set the lateral force near the limit. Where the data fix only their
@@ -7,7 +7,10 @@ combination, the posterior of the pair is a long, thin ellipse: the two are stro
 and each one's std given the other is a small part of its own std (σ_i·√(1 − ρ²): below 0.44·σ_i
 at |ρ| ≥ 0.9). The ridge matters only where it is long: two parameters pinned to a few per cent of
 their prior each (l_f and C_αr on a clean drive often correlate at 0.9) are determined one by
-one, and only share their error.
+one, and only share their error. Three or more can trade where no two do (two friction factors
+and the downforce all set the grip of a fast corner): a parameter each of whose std given the
+others is below that 0.44 of its own, while no single partner explains it, is reported with the
+fewest partners that do.
 
 Coordinates: the box's logit coordinates (`vdsbi.problem.Box`), in which the likelihood
 posterior is Gaussian and a bound does not squeeze the ridge (an inertia index held at the top
@@ -54,6 +57,9 @@ def trading_pairs(
         pair trades when |ρ| ≥ `RIDGE_CORRELATION` and each member's std is at least
         `RIDGE_MIN_RATIO` of its prior std. "direction" is one step along the ridge in parameter
         units: each member by its std, b's sign that of ρ; the fit barely changes along it.
+        Then the groups of three or more (`_groups`): "pair" lists every member, "correlation"
+        is the multiple correlation of the member the others explain, "direction" one std of
+        the posterior along the group's longest axis.
     """
     cov = np.asarray(cov, float)
     step = np.asarray(step, float)
@@ -70,4 +76,52 @@ def trading_pairs(
             a, b = names[i], names[j]
             direction = {a: float(step[i]), b: float(np.sign(rho) * step[j])}
             out.append({"pair": [a, b], "correlation": round(rho, 3), "direction": direction, "what": WHAT})
-    return sorted(out, key=lambda p: -abs(p["correlation"]))
+    out = sorted(out, key=lambda p: -abs(p["correlation"]))
+    return out + _groups(cov, names, step, np.flatnonzero(long), {n for p in out for n in p["pair"]})
+
+
+def _groups(cov, names, step, long: np.ndarray, paired: set) -> list[dict]:
+    """Groups of three or more long parameters that trade where no two do (see the module)."""
+    corr = cov / np.sqrt(np.outer(np.diag(cov), np.diag(cov)))
+    limit = 1.0 - RIDGE_CORRELATION**2  # the conditional variance's share at the pair's |ρ|
+    out, seen = [], set()
+    for i in long:
+        if names[i] in paired:
+            continue
+        chosen: list[int] = []
+        while _conditional(corr, i, chosen) > limit and len(chosen) < len(long) - 1:
+            rest = [j for j in long if j != i and j not in chosen]
+            chosen.append(min(rest, key=lambda j: _conditional(corr, i, [*chosen, j])))
+        members = sorted([i, *chosen])
+        if len(members) < 3 or _conditional(corr, i, chosen) > limit or tuple(members) in seen:
+            continue
+        seen.add(tuple(members))
+        # The ridge: the block's longest axis (in stds), one std of the posterior along it.
+        lam, vec = np.linalg.eigh(corr[np.ix_(members, members)])
+        axis = vec[:, -1] * np.sqrt(lam[-1]) * np.sign(vec[members.index(i), -1])
+        out.append(
+            {
+                "pair": [names[j] for j in members],
+                "correlation": round(float(np.sqrt(1.0 - _conditional(corr, i, chosen))), 3),
+                "direction": {names[j]: float(a * step[j]) for j, a in zip(members, axis)},
+                "what": WHAT.replace("the two move", "they move"),
+            }
+        )
+    return out
+
+
+def _conditional(corr, i: int, given: list[int]) -> float:
+    """Var(x_i | x_given) / Var(x_i) from a correlation matrix."""
+    if not given:
+        return 1.0
+    c = corr[np.ix_(given, given)]
+    v = corr[given, i]
+    return float(max(0.0, 1.0 - v @ np.linalg.solve(c, v)))
+
+
+def ridge_sentence(pair: dict) -> str:
+    """ "a and b trade along a ridge (ρ = …)" or "a, b and c trade along a ridge (R = …)"."""
+    members = pair["pair"]
+    who = " and ".join([", ".join(members[:-1]), members[-1]])
+    mark = "ρ" if len(members) == 2 else "R"
+    return f"{who} trade along a ridge ({mark} = {pair['correlation']:+.2f})"
