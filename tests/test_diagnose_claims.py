@@ -9,6 +9,7 @@ import shlex
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 import vdsbi.discovery
@@ -31,6 +32,29 @@ def test_held_out_improves_only_if_no_channel_gets_worse():
     few = lambda ay, yaw: {c: v | {"samples": 200} for c, v in _held(ay, yaw).items()}
     assert held_out_improves(few(40.0, 1.0), few(1.0, 1.15))
     assert not held_out_improves(few(40.0, 1.0), few(1.0, 1.25))
+
+
+def test_a_fall_every_held_out_window_shows_counts_though_each_mean_is_noisy():
+    # A real drive's residual is correlated over tens of samples: each channel's held-out χ²/dof
+    # is known to ±35 % alone, but both fits are scored on the same samples, window by window.
+    def held(ay, yaw, windows):
+        out = _held(ay, yaw)
+        for c in out:
+            out[c] |= {"samples": 640, "chi2_windows": list(windows)}
+        return out
+
+    tau = {"ay": 40.0, "yaw_rate": 40.0}
+    rng = np.random.default_rng(0)
+    level = rng.uniform(20.0, 80.0, 11)  # the windows' misfit varies far more than the fix moves it
+    consistent = held(41.3, 41.3, 0.8 * level + rng.normal(0.0, 1.0, 11))
+    assert held_out_improves(held(51.7, 51.7, level), consistent, tau)
+    # the same fall in the mean, made of windows much better and windows worse: within the noise
+    mixed = level * np.where(np.arange(11) % 2 == 0, 0.4, 1.3)
+    assert 0.75 < mixed.mean() / level.mean() < 0.85
+    assert not held_out_improves(held(51.7, 51.7, level), held(41.3, 41.3, mixed), tau)
+    # without windows to pair, each mean's own noise (±50 % here) is allowed for
+    plain = lambda v: {c: x | {"samples": 640} for c, x in _held(v, v).items()}
+    assert not held_out_improves(plain(51.7), plain(41.3), tau)
 
 
 def _fake(improved: bool, chosen=("steering_lag",), dropped=()):

@@ -63,7 +63,8 @@ def test_three_that_trade_where_no_two_do_are_reported_as_a_group():
     d = group["direction"]
     # along the ridge the sum barely moves, each member by about its share of the posterior
     assert abs(d[names[0]] + d[names[1]] + d[names[2]]) < 0.05 * abs(d[names[2]])
-    assert ridge_sentence(group).startswith("tyre_friction.front, tyre_friction.rear and downforce.coef trade")
+    sentence = ridge_sentence(group)
+    assert sentence.startswith("tyre_friction.front, tyre_friction.rear and downforce.coef trade")
     # a pair that trades is still reported as a pair, and a member of it is not grouped again
     (pair,) = trading_pairs(_cov([1.0, 2.0, 0.3], 0.95), names[:3], np.ones(3))
     assert len(pair["pair"]) == 2

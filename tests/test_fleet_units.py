@@ -161,8 +161,7 @@ def test_a_local_cluster_left_without_workers_gives_up_its_drives(monkeypatch):
     (a re-run retries them) instead of waiting for ever."""
     distributed = pytest.importorskip("distributed")
 
-    from vdsbi.fleet import Cluster
-    from vdsbi.fleet import _fleet
+    from vdsbi.fleet import Cluster, _fleet
 
     monkeypatch.setattr(_fleet, "WORKER_CHECK_S", 0.2)
     monkeypatch.setattr(_fleet, "NO_WORKERS_S", 1.0)

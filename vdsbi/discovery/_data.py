@@ -24,13 +24,18 @@ def held_out_from(problem: Problem) -> list[float]:
 
 def held_out_scores(problem: Problem, pred: np.ndarray, var: np.ndarray | None = None) -> dict:
     """`vdsbi.problem.validation.channel_scores` of the (W, K, C) prediction `pred` on the held-out
-    samples of `problem` (no parameters were fitted on these). With `var` (W, K, C), the
+    samples of `problem` (no parameters were fitted on these), with each window's χ²/dof
+    (`chi2_windows`: a paired comparison of two fits reads them). With `var` (W, K, C), the
     variance of the prediction that the fit's parameter uncertainty carries, also
     `chi2_dof_predictive`: the squared error over σ² + var, the check of the held-out data
     against the fit's own predictive distribution."""
     out = channel_scores(problem, pred, problem.held)
+    m = problem.held
+    for c, name in enumerate(problem.channels):
+        z2 = np.where(m, ((pred[..., c] - problem.y[..., c]) / problem.sigma[c]) ** 2, 0.0)
+        # a window with nothing held out: None
+        out[name]["chi2_windows"] = [float(s / k) if k else None for s, k in zip(z2.sum(1), m.sum(1))]
     if var is not None:
-        m = problem.held
         for c, name in enumerate(problem.channels):
             err = (pred[..., c] - problem.y[..., c])[m]
             out[name]["chi2_dof_predictive"] = float(

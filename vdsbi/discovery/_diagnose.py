@@ -327,17 +327,22 @@ def _conclude(before, decision, base, after, held, terms, test_terms, windows: P
 
 
 #: A fix counts as an improvement where the channels' mean held-out χ²/dof falls by more than this
-#: share, and no channel's grows by more than it; or by more than two standard deviations of the
-#: χ²/dof (the held-out part's own sampling noise: 2·√(2τ/N) relative, N samples correlated over
-#: τ) where that is more. A change within the noise is no fix either way.
+#: share, beyond the held-out part's own sampling noise, and no channel's grows by more than it or
+#: by more than two standard deviations of its χ²/dof (2·√(2τ/N) relative, N samples correlated
+#: over τ) where that is more. A change within the noise is no fix either way.
 HELD_OUT_SLACK = 0.02
+#: Held-out windows from which the fall of the mean is judged by its paired differences.
+PAIRED_WINDOWS = 3
 
 
 def held_out_improves(before: dict, after: dict, tau: dict | None = None) -> bool:
-    """Whether a fix improves the held-out fit: the channels' mean χ²/dof falls by more than its
-    slack and none grows by more than its own (`HELD_OUT_SLACK`). A fix that trades one channel's
-    fit for another's is not one, nor one that moves it within the noise. `tau`: each channel's
-    residual autocorrelation time (default 1)."""
+    """Whether a fix improves the held-out fit: the channels' mean χ²/dof falls by more than
+    `HELD_OUT_SLACK` and by more than its noise, and no channel's grows by more than its own
+    slack. A fix that trades one channel's fit for another's is not one, nor one that moves it
+    within the noise. The fall's noise: both fits are scored on the same samples, so where at
+    least `PAIRED_WINDOWS` windows hold some out (`chi2_windows`), the fall must exceed twice the
+    standard error of the windows' paired differences; otherwise each mean's own sampling noise
+    is allowed for. `tau`: each channel's residual autocorrelation time (default 1)."""
     tau = tau or {}
 
     def slack(c):
@@ -346,9 +351,26 @@ def held_out_improves(before: dict, after: dict, tau: dict | None = None) -> boo
 
     mean = lambda h: float(np.mean([v["chi2_dof"] for v in h.values()]))
     worse = any(after[c]["chi2_dof"] > (1 + slack(c)) * before[c]["chi2_dof"] for c in before)
-    # The mean's own noise: the channels' relative slacks, combined as independent.
-    mean_slack = max(HELD_OUT_SLACK, float(np.sqrt(np.mean([slack(c) ** 2 for c in before]) / len(before))))
-    return bool(mean(after) < (1 - mean_slack) * mean(before) and not worse)
+    falls = mean(after) < (1 - HELD_OUT_SLACK) * mean(before)
+    paired = _paired_fall(before, after)
+    if paired is None:
+        # The mean's own noise: the channels' relative slacks, combined as independent.
+        noise = float(np.sqrt(np.mean([slack(c) ** 2 for c in before]) / len(before)))
+        paired = mean(after) < (1 - noise) * mean(before)
+    return bool(falls and paired and not worse)
+
+
+def _paired_fall(before: dict, after: dict) -> bool | None:
+    """Whether the windows' mean χ²/dof fall by more than twice the standard error of their paired
+    differences; None with fewer than `PAIRED_WINDOWS` windows to pair."""
+    if not all("chi2_windows" in h[c] for h in (before, after) for c in before):
+        return None
+    b = np.mean(np.array([before[c]["chi2_windows"] for c in before], dtype=float), axis=0)
+    a = np.mean(np.array([after[c]["chi2_windows"] for c in before], dtype=float), axis=0)
+    d = (b - a)[np.isfinite(a) & np.isfinite(b)]
+    if d.size < PAIRED_WINDOWS:
+        return None
+    return bool(d.mean() > 2.0 * d.std(ddof=1) / np.sqrt(d.size))
 
 
 def diagnose_mismatch(
