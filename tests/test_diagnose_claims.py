@@ -15,6 +15,7 @@ import pytest
 import vdsbi.discovery
 from vdsbi import api
 from vdsbi.cli import build_parser, main
+from vdsbi.discovery._data import _blocks
 from vdsbi.discovery._diagnose import held_out_improves
 
 
@@ -34,27 +35,39 @@ def test_held_out_improves_only_if_no_channel_gets_worse():
     assert not held_out_improves(few(40.0, 1.0), few(1.0, 1.25))
 
 
-def test_a_fall_every_held_out_window_shows_counts_though_each_mean_is_noisy():
+def test_a_fall_every_held_out_block_shows_counts_though_each_mean_is_noisy():
     # A real drive's residual is correlated over tens of samples: each channel's held-out χ²/dof
-    # is known to ±35 % alone, but both fits are scored on the same samples, window by window.
-    def held(ay, yaw, windows):
+    # is known to ±35 % alone, but both fits are scored on the same samples, block by block.
+    def held(ay, yaw, blocks):
         out = _held(ay, yaw)
         for c in out:
-            out[c] |= {"samples": 640, "chi2_windows": list(windows)}
+            out[c] |= {"samples": 640, "chi2_blocks": list(blocks)}
         return out
 
     tau = {"ay": 40.0, "yaw_rate": 40.0}
     rng = np.random.default_rng(0)
-    level = rng.uniform(20.0, 80.0, 11)  # the windows' misfit varies far more than the fix moves it
-    consistent = held(41.3, 41.3, 0.8 * level + rng.normal(0.0, 1.0, 11))
-    assert held_out_improves(held(51.7, 51.7, level), consistent, tau)
-    # the same fall in the mean, made of windows much better and windows worse: within the noise
-    mixed = level * np.where(np.arange(11) % 2 == 0, 0.4, 1.3)
-    assert 0.75 < mixed.mean() / level.mean() < 0.85
+    level = rng.uniform(20.0, 80.0, 8)  # the blocks' misfit varies far more than the fix moves it
+    consistent = 0.8 * level + rng.normal(0.0, 1.0, 8)
+    assert held_out_improves(held(51.7, 51.7, level), held(41.3, 41.3, consistent), tau)
+    # the same fall in the mean, made of blocks much better and blocks worse: within the noise
+    mixed = level * np.where(np.arange(8) % 2 == 0, 0.4, 1.3)
+    assert 0.75 < mixed.mean() / level.mean() < 0.9
     assert not held_out_improves(held(51.7, 51.7, level), held(41.3, 41.3, mixed), tau)
-    # without windows to pair, each mean's own noise (±50 % here) is allowed for
-    plain = lambda v: {c: x | {"samples": 640} for c, x in _held(v, v).items()}
-    assert not held_out_improves(plain(51.7), plain(41.3), tau)
+    # three blocks are too few to pair: each mean's own noise (±50 % here) is allowed for
+    assert not held_out_improves(held(51.7, 51.7, level[:3]), held(41.3, 41.3, consistent[:3]), tau)
+
+
+def test_held_out_blocks_are_runs_of_held_samples_within_each_window():
+    held = np.zeros((3, 10), bool)
+    held[0, 6:] = True  # 4 samples: one block of 3 with the short rest joined to it
+    held[2, :] = True  # 10 samples: blocks of 3, 3 and 4
+    blocks = _blocks(held, 3)
+    assert [(w, k.tolist()) for w, k in blocks] == [
+        (0, [6, 7, 8, 9]),
+        (2, [0, 1, 2]),
+        (2, [3, 4, 5]),
+        (2, [6, 7, 8, 9]),
+    ]
 
 
 def _fake(improved: bool, chosen=("steering_lag",), dropped=()):

@@ -22,23 +22,41 @@ def held_out_from(problem: Problem) -> list[float]:
     return out
 
 
-def held_out_scores(problem: Problem, pred: np.ndarray, var: np.ndarray | None = None) -> dict:
+def held_out_scores(
+    problem: Problem, pred: np.ndarray, var: np.ndarray | None = None, block: int = 0
+) -> dict:
     """`vdsbi.problem.validation.channel_scores` of the (W, K, C) prediction `pred` on the held-out
-    samples of `problem` (no parameters were fitted on these), with each window's χ²/dof
-    (`chi2_windows`: a paired comparison of two fits reads them). With `var` (W, K, C), the
-    variance of the prediction that the fit's parameter uncertainty carries, also
-    `chi2_dof_predictive`: the squared error over σ² + var, the check of the held-out data
-    against the fit's own predictive distribution."""
+    samples of `problem` (no parameters were fitted on these). With `block` > 0, also each run of
+    `block` consecutive held-out samples' χ²/dof (`chi2_blocks`, in the same blocks for every
+    channel and every prediction of `problem`: a paired comparison of two fits reads them). With
+    `var` (W, K, C), the variance of the prediction that the fit's parameter uncertainty
+    carries, also `chi2_dof_predictive`: the squared error over σ² + var, the check of the
+    held-out data against the fit's own predictive distribution."""
     out = channel_scores(problem, pred, problem.held)
     m = problem.held
-    for c, name in enumerate(problem.channels):
-        z2 = np.where(m, ((pred[..., c] - problem.y[..., c]) / problem.sigma[c]) ** 2, 0.0)
-        # a window with nothing held out: None
-        out[name]["chi2_windows"] = [float(s / k) if k else None for s, k in zip(z2.sum(1), m.sum(1))]
+    if block > 0:
+        blocks = _blocks(m, block)
+        for c, name in enumerate(problem.channels):
+            z2 = ((pred[..., c] - problem.y[..., c]) / problem.sigma[c]) ** 2
+            out[name]["chi2_blocks"] = [float(np.mean(z2[w, k])) for w, k in blocks]
     if var is not None:
         for c, name in enumerate(problem.channels):
             err = (pred[..., c] - problem.y[..., c])[m]
             out[name]["chi2_dof_predictive"] = float(
                 np.mean(err**2 / (problem.sigma[c] ** 2 + var[..., c][m]))
             )
+    return out
+
+
+def _blocks(held: np.ndarray, block: int) -> list[tuple[int, np.ndarray]]:
+    """(window, sample indices) of each run of `block` consecutive held-out samples of each window;
+    a window's last, shorter run joins the one before it (or stands alone if it is the only one)."""
+    out = []
+    for w in range(held.shape[0]):
+        k = np.flatnonzero(held[w])
+        runs = [k[i : i + block] for i in range(0, len(k), block)]
+        if len(runs) > 1 and len(runs[-1]) < block:
+            last = runs.pop()
+            runs[-1] = np.concatenate([runs[-1], last])
+        out += [(w, r) for r in runs]
     return out

@@ -19,6 +19,7 @@ from typing import NamedTuple
 
 import jax
 import numpy as np
+from scipy import stats
 
 from ..diagnostics import Localisation, MisspecificationTest, locate_mismatch, misspecification_test
 from ..estimation import ModelError
@@ -211,15 +212,22 @@ def _locate(before: _Check, windows: Problem, s: DiagnoseSettings, say) -> tuple
     return loc, detected
 
 
-def _held_out(fitter: Fitter, windows: Problem, fits: dict[str, DiscoveryFit]):
+def _held_out(fitter: Fitter, windows: Problem, fits: dict[str, DiscoveryFit], block: int):
     """Whole-window predictions (W, K, C) of each fit on every window of `windows`, their
-    variances from the fit's parameter uncertainty, and their held-out scores."""
+    variances from the fit's parameter uncertainty, and their held-out scores (with those of
+    runs of `block` samples)."""
     pred, var, held = {}, {}, {}
     for key, fit in fits.items():
         pred[key] = fitter.predict(fit.z, fit.effects, windows)
         var[key] = fitter.prediction_variance(fit, windows)
-        held[key] = held_out_scores(windows, pred[key], var[key])
+        held[key] = held_out_scores(windows, pred[key], var[key], block)
     return pred, var, held
+
+
+def _block(base: DiscoveryFit) -> int:
+    """Held-out samples per block of the paired comparison: twice the base fit's longest residual
+    autocorrelation time, so that the blocks' differences are close to independent."""
+    return max(1, int(np.ceil(2.0 * float(np.max(base.noise.tau)))))
 
 
 def _search(
@@ -331,8 +339,8 @@ def _conclude(before, decision, base, after, held, terms, test_terms, windows: P
 #: by more than two standard deviations of its χ²/dof (2·√(2τ/N) relative, N samples correlated
 #: over τ) where that is more. A change within the noise is no fix either way.
 HELD_OUT_SLACK = 0.02
-#: Held-out windows from which the fall of the mean is judged by its paired differences.
-PAIRED_WINDOWS = 3
+#: Held-out blocks from which the fall of the mean is judged by their paired differences.
+PAIRED_BLOCKS = 4
 
 
 def held_out_improves(before: dict, after: dict, tau: dict | None = None) -> bool:
@@ -340,9 +348,9 @@ def held_out_improves(before: dict, after: dict, tau: dict | None = None) -> boo
     `HELD_OUT_SLACK` and by more than its noise, and no channel's grows by more than its own
     slack. A fix that trades one channel's fit for another's is not one, nor one that moves it
     within the noise. The fall's noise: both fits are scored on the same samples, so where at
-    least `PAIRED_WINDOWS` windows hold some out (`chi2_windows`), the fall must exceed twice the
-    standard error of the windows' paired differences; otherwise each mean's own sampling noise
-    is allowed for. `tau`: each channel's residual autocorrelation time (default 1)."""
+    least `PAIRED_BLOCKS` blocks of them are scored (`chi2_blocks`), the blocks' paired
+    differences must show it (Student's t, one-sided 2.5 %); otherwise each mean's own sampling
+    noise is allowed for. `tau`: each channel's residual autocorrelation time (default 1)."""
     tau = tau or {}
 
     def slack(c):
@@ -361,16 +369,14 @@ def held_out_improves(before: dict, after: dict, tau: dict | None = None) -> boo
 
 
 def _paired_fall(before: dict, after: dict) -> bool | None:
-    """Whether the windows' mean χ²/dof fall by more than twice the standard error of their paired
-    differences; None with fewer than `PAIRED_WINDOWS` windows to pair."""
-    if not all("chi2_windows" in h[c] for h in (before, after) for c in before):
+    """Whether the blocks' mean χ²/dof falls beyond the noise of their paired differences
+    (Student's t at one-sided 2.5 %); None with fewer than `PAIRED_BLOCKS` blocks."""
+    if not all("chi2_blocks" in h[c] for h in (before, after) for c in before):
         return None
-    b = np.mean(np.array([before[c]["chi2_windows"] for c in before], dtype=float), axis=0)
-    a = np.mean(np.array([after[c]["chi2_windows"] for c in before], dtype=float), axis=0)
-    d = (b - a)[np.isfinite(a) & np.isfinite(b)]
-    if d.size < PAIRED_WINDOWS:
+    d = np.mean([np.subtract(before[c]["chi2_blocks"], after[c]["chi2_blocks"]) for c in before], axis=0)
+    if d.size < PAIRED_BLOCKS:
         return None
-    return bool(d.mean() > 2.0 * d.std(ddof=1) / np.sqrt(d.size))
+    return bool(d.mean() > stats.t.ppf(0.975, d.size - 1) * d.std(ddof=1) / np.sqrt(d.size))
 
 
 def diagnose_mismatch(
@@ -450,12 +456,14 @@ def _find(
     decision = _decide(search, fitter, base, detected, s, say)
     after = _check(decision.final, fitted, s.seed + 1, s)
     predicting.result()  # compiled (or raised) before the comparison calls it
-    predictions, variances, held = _held_out(fitter, windows, {"before": base, "after": decision.final})
+    block = _block(base)
+    fits = {"before": base, "after": decision.final}
+    predictions, variances, held = _held_out(fitter, windows, fits, block)
     worst = worst_channel(held["after"])
     held_ok = not detected or worst[1] <= claim_limit(worst[2])
     terms, test_terms = _describe_remainder(fitter, base, decision, after, held_ok, s, say)
     if terms is not None and terms.fit is not None:
-        extra = _held_out(terms.fitter, windows, {"after_terms": terms.fit})
+        extra = _held_out(terms.fitter, windows, {"after_terms": terms.fit}, block)
         for into, part in zip((predictions, variances, held), extra):
             into.update(part)
     conclusion, section, shown = _conclude(before, decision, base, after, held, terms, test_terms, windows, s)
