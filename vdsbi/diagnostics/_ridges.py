@@ -10,7 +10,7 @@ their prior each (l_f and C_αr on a clean drive often correlate at 0.9) are det
 one, and only share their error. Three or more can trade where no two do (two friction factors
 and the downforce all set the grip of a fast corner): a parameter each of whose std given the
 others is below that 0.44 of its own, while no single partner explains it, is reported with the
-fewest partners that do.
+fewest partners that do (two at most).
 
 Coordinates: the box's logit coordinates (`vdsbi.problem.Box`), in which the likelihood
 posterior is Gaussian and a bound does not squeeze the ridge (an inertia index held at the top
@@ -31,6 +31,9 @@ RIDGE_CORRELATION = 0.9
 #: Each member's std over its prior std at or above which the ridge is long enough to leave it
 #: undetermined alone.
 RIDGE_MIN_RATIO = 0.2
+#: Most members of a group that trades: a parameter that only many others together explain is
+#: left to the determined combinations (`combinations`), not named as a ridge.
+GROUP_SIZE = 3
 WHAT = (
     "the two move together along this step (each by its std) with the fit barely changed: the drive "
     "determines their combination, not each alone"
@@ -89,7 +92,7 @@ def _groups(cov, names, step, long: np.ndarray, paired: set) -> list[dict]:
         if names[i] in paired:
             continue
         chosen: list[int] = []
-        while _conditional(corr, i, chosen) > limit and len(chosen) < len(long) - 1:
+        while _conditional(corr, i, chosen) > limit and len(chosen) < min(GROUP_SIZE - 1, len(long) - 1):
             rest = [j for j in long if j != i and j not in chosen]
             chosen.append(min(rest, key=lambda j: _conditional(corr, i, [*chosen, j])))
         members = sorted([i, *chosen])
