@@ -46,6 +46,7 @@ RETIRED = {
     "ensemble": 1,
     "combined_loss": False,
     "truncation_widen": 1.0,
+    "context_gating": False,
 }
 
 
