@@ -16,7 +16,7 @@ import vdsbi.discovery
 from vdsbi import api
 from vdsbi.cli import build_parser, main
 from vdsbi.discovery._data import _blocks
-from vdsbi.discovery._diagnose import held_out_improves
+from vdsbi.discovery._held_out import held_out_improves
 
 
 def _held(ay, yaw):
