@@ -19,7 +19,7 @@ from vdsbi.simulator import (
     simulate,
 )
 from vdsbi.simulator._vehicle import VEHICLE_KEYS
-from vdsbi.simulator.effects import EFFECTS, AbstractEffect, register_effect
+from vdsbi.simulator.effects import EFFECTS, AbstractEffect, Param, register_effect
 
 NOISE = {"ax": 0.1, "ay": 0.1, "yaw_rate": 0.004, "omega_front": 0.1, "omega_rear": 0.1}
 
@@ -28,12 +28,7 @@ class TowPull(AbstractEffect):
     """A constant rearward pull on the body, e.g. a trailer (felt by the accelerometer)."""
 
     name = "test_tow_pull"
-    param_names = ("force",)
-    units = ("N",)
-    null = (0.0,)
-    typical = ((0.0, 2000.0),)
-    bounds = ((0.0, 5000.0),)
-    start = (100.0,)
+    params = (Param("force", "N", null=0.0, typical=(0.0, 2000.0), bounds=(0.0, 5000.0), start=100.0),)
     description = "constant rearward pull"
 
     def body_force(self, p, ctx):

@@ -12,7 +12,6 @@ from vdsbi.io import build_recording
 from vdsbi.problem import Box, measured_steer_lag, parameter_names, prior_box
 from vdsbi.simulator import default_vehicle
 from vdsbi.simulator._effects._steering_lag import SteeringLag
-from vdsbi.simulator.effects import register_effect
 
 
 def test_a_measured_lag_adds_starts_at_it_and_at_half_of_it():
@@ -53,9 +52,8 @@ def test_diagnose_starts_each_steer_lag_parameter_at_half_the_measured_lag():
 
 
 def test_an_effect_naming_an_unknown_steer_lag_parameter_is_refused():
-    class Lagging(SteeringLag):
-        name = "lagging"
-        steer_lag = ("delay",)
-
     with pytest.raises(ValueError, match="steer_lag"):
-        register_effect(Lagging)
+
+        class Lagging(SteeringLag):
+            name = "lagging"
+            steer_lag = ("delay",)

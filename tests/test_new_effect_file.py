@@ -17,19 +17,14 @@ import vdsbi
 TOY_EFFECT = '''
 import jax.numpy as jnp
 
-from ._base import AbstractEffect
+from ._base import AbstractEffect, Param
 
 
 class TowPull(AbstractEffect):
     """A constant rearward pull on the body, e.g. a trailer (felt by the accelerometer)."""
 
     name = "tow_pull"
-    param_names = ("force",)
-    units = ("N",)
-    null = (0.0,)
-    typical = ((300.0, 2000.0),)
-    bounds = ((0.0, 5000.0),)
-    start = (100.0,)
+    params = (Param("force", "N", null=0.0, typical=(300.0, 2000.0), bounds=(0.0, 5000.0), start=100.0),)
     description = "constant rearward pull"
 
     def body_force(self, p, ctx):

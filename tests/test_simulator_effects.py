@@ -23,7 +23,7 @@ from vdsbi.simulator import (
     solve,
 )
 from vdsbi.simulator._effects._aero_drag import AIR_DENSITY
-from vdsbi.simulator.effects import EFFECTS, AbstractEffect, effect_params_from, register_effect
+from vdsbi.simulator.effects import EFFECTS, AbstractEffect, Param, effect_params_from, register_effect
 from vdsbi.simulator.solvers import Solver
 
 VEHICLE = default_vehicle()
@@ -275,12 +275,7 @@ def test_a_new_effect_takes_one_class_and_one_line(x64):
         """A constant rearward pull on the body, e.g. a trailer (felt by the accelerometer)."""
 
         name = "test_tow_force"
-        param_names = ("force",)
-        units = ("N",)
-        null = (0.0,)
-        typical = ((0.0, 2000.0),)
-        bounds = ((0.0, 5000.0),)
-        start = (100.0,)
+        params = (Param("force", "N", null=0.0, typical=(0.0, 2000.0), bounds=(0.0, 5000.0), start=100.0),)
         description = "constant rearward pull"
 
         def body_force(self, p, ctx):
@@ -304,19 +299,28 @@ def test_a_new_effect_takes_one_class_and_one_line(x64):
         assert ok
         d_ax = ys[:, I["ax"]] - base[:, I["ax"]]
         assert abs(d_ax.mean() + 450.0 / VEHICLE.mass) < 0.05 * 450.0 / VEHICLE.mass
-        meta = ("name", "param_names", "units", "null", "typical", "bounds", "start")
-        attrs = {a: getattr(TowForce, a) for a in meta}
+        attrs = {a: getattr(TowForce, a) for a in ("name", "params")}
         clash = type("Clash", (AbstractEffect,), {**attrs, "description": "same name"})
         with pytest.raises(ValueError, match="already registered"):
             register_effect(clash)
-        # metadata is checked: a start on the edge of the fit box, and missing bounds
-        edge = type("Edge", (AbstractEffect,), {**attrs, "name": "edge", "start": (0.0,), "description": "x"})
-        with pytest.raises(ValueError, match="strictly inside"):
-            register_effect(edge)
-        attrs.pop("bounds")
-        partial = type("Partial", (AbstractEffect,), {**attrs, "name": "partial", "description": "x"})
-        with pytest.raises(ValueError, match="bounds"):
+        # the records are checked when the class is defined: a start on the edge of the fit box,
+        # a typical range outside it, a repeated name
+        force = TowForce.params[0]
+        for bad, match in (
+            (force._replace(start=0.0), "strictly inside"),
+            (force._replace(typical=(0.0, 6000.0)), "typical range"),
+        ):
+            with pytest.raises(ValueError, match=match):
+                type("Edge", (AbstractEffect,), {"name": "edge", "params": (bad,), "description": "x"})
+        with pytest.raises(ValueError, match="repeat"):
+            type("Twice", (AbstractEffect,), {"name": "twice", "params": (force, force), "description": "x"})
+        # and the registry wants every attribute: no description
+        partial = type("Partial", (AbstractEffect,), {**attrs, "name": "partial"})
+        with pytest.raises(ValueError, match="description"):
             register_effect(partial)
+        # the columns every consumer reads come from the records
+        columns = (TowForce.param_names, TowForce.units, TowForce.bounds)
+        assert columns == (("force",), ("N",), ((0.0, 5000.0),))
         assert "edge" not in EFFECTS and "partial" not in EFFECTS
     finally:
         EFFECTS.pop("test_tow_force", None)

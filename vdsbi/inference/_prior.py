@@ -1,12 +1,13 @@
-"""Uniform box prior and the fixed bijection from the box to R^n."""
+"""Uniform box prior; its bijection to ℝⁿ is the problem's one (`vdsbi.problem.Box`)."""
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
-# Unit-box coordinates are kept in [EDGE, 1 - EDGE] so logit stays finite in float32.
+from ..problem import Box
+
+#: A flow's draws keep this far (a share of the width) from the box's faces.
 EDGE = 1e-6
 
 
@@ -19,50 +20,48 @@ class BoxPrior(eqx.Module):
         names: optional parameter names (length ``d``).
     """
 
-    low: Float[Array, " d"]
-    high: Float[Array, " d"]
-    names: tuple[str, ...] | None = eqx.field(static=True, default=None)
+    box: Box
+    named: bool = eqx.field(static=True)
 
     def __init__(self, low, high, names=None):
-        self.low = jnp.asarray(low, dtype=float).reshape(-1)
-        self.high = jnp.asarray(high, dtype=float).reshape(-1)
-        self.names = None if names is None else tuple(names)
+        low = jnp.asarray(low, dtype=float).reshape(-1)
+        high = jnp.asarray(high, dtype=float).reshape(-1)
+        self.named = names is not None
+        names = tuple(names) if self.named else tuple(f"theta_{i}" for i in range(low.size))
+        self.box = Box(low, high, names)
 
-    def __check_init__(self):
-        if self.low.shape != self.high.shape:
-            raise ValueError(f"low {self.low.shape} and high {self.high.shape} must have the same shape")
-        if not np.all(np.asarray(self.high) > np.asarray(self.low)):
-            raise ValueError("BoxPrior needs high > low in every dimension")
-        if self.names is not None and len(self.names) != self.low.shape[0]:
-            raise ValueError(f"{len(self.names)} names for {self.low.shape[0]} parameters")
+    @property
+    def low(self) -> Float[Array, " d"]:
+        return self.box.low
+
+    @property
+    def high(self) -> Float[Array, " d"]:
+        return self.box.high
+
+    @property
+    def names(self) -> tuple[str, ...] | None:
+        return self.box.names if self.named else None
 
     @property
     def dim(self) -> int:
-        return self.low.shape[0]
+        return self.box.dim
 
     def sample(self, key: PRNGKeyArray, n: int) -> Float[Array, "n d"]:
         """``n`` independent draws."""
         u = jax.random.uniform(key, (n, self.dim), dtype=self.low.dtype)
-        return self.low + u * (self.high - self.low)
+        return self.low + u * self.box.width
 
     def log_prob(self, theta: Float[Array, "*batch d"]) -> Float[Array, "*batch"]:
         """Log density; ``-inf`` outside the (closed) box."""
-        inside = jnp.all((theta >= self.low) & (theta <= self.high), axis=-1)
-        lp = -jnp.sum(jnp.log(self.high - self.low))
-        return jnp.where(inside, lp, -jnp.inf)
+        lp = -jnp.sum(jnp.log(self.box.width))
+        return jnp.where(self.box.contains(theta), lp, -jnp.inf)
 
     def to_unbounded(self, theta: Float[Array, " d"]) -> tuple[Float[Array, " d"], Float[Array, ""]]:
-        """``z = logit((theta - low) / (high - low))`` for one θ; returns ``(z, log|dz/dθ|)``."""
-        u = jnp.clip((theta - self.low) / (self.high - self.low), EDGE, 1.0 - EDGE)
-        z = jnp.log(u) - jnp.log1p(-u)
-        logdet = -jnp.sum(jnp.log(u) + jnp.log1p(-u) + jnp.log(self.high - self.low))
-        return z, logdet
+        """``z`` of one θ (`Box.to_unbounded`) and ``log|dz/dθ|`` there."""
+        z = self.box.to_unbounded(theta, edge=EDGE)
+        return z, -self.box.log_det_from_unbounded(z)
 
     def from_unbounded(self, z: Float[Array, " d"]) -> Float[Array, " d"]:
-        """Inverse of :meth:`to_unbounded`.
-
-        The result lies inside the closed box always, and strictly inside unless the box is
-        narrower than ~1e-6 of its offset in the working precision.
-        """
-        u = jnp.clip(jax.nn.sigmoid(z), EDGE, 1.0 - EDGE)
-        return jnp.clip(self.low + u * (self.high - self.low), self.low, self.high)
+        """Inverse of :meth:`to_unbounded`. A flow's draw lands strictly inside the box (where
+        the working precision resolves it), so every draw maps back to the z it came from."""
+        return self.box.from_unbounded(z, edge=EDGE)

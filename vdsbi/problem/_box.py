@@ -59,9 +59,14 @@ class Box(eqx.Module):
         u = jnp.clip((jnp.asarray(theta) - self.low) / self.width, edge, 1.0 - edge)
         return jnp.log(u) - jnp.log1p(-u)
 
-    def from_unbounded(self, z: Float[ArrayLike, " d"]) -> Float[Array, " d"]:
-        """θ = low + (high − low)·sigmoid(z): inside the closed box for every z."""
-        return jnp.clip(self.low + self.width * jax.nn.sigmoid(jnp.asarray(z)), self.low, self.high)
+    def from_unbounded(self, z: Float[ArrayLike, " d"], edge: float = 0.0) -> Float[Array, " d"]:
+        """θ = low + (high − low)·sigmoid(z): inside the closed box for every z; with `edge`, the
+        unit coordinate is held in [edge, 1 − edge] as `to_unbounded` holds it (strictly inside
+        the box where the working precision resolves it)."""
+        u = jax.nn.sigmoid(jnp.asarray(z))
+        if edge:
+            u = jnp.clip(u, edge, 1.0 - edge)
+        return jnp.clip(self.low + self.width * u, self.low, self.high)
 
     def log_det_from_unbounded(self, z: Float[ArrayLike, " d"]) -> Float[Array, ""]:
         """log|dθ/dz| at z."""

@@ -1,6 +1,6 @@
 """Physics effects: the registry `EFFECTS` (name → class, in search order), `get_effect`,
-`register_effect` and the `AbstractEffect` / `Context` interface an effect implements (one module
-each in `_effects/`), the candidate terms `TERMS` with `term_effect` / `term_formula` that describe
+`register_effect` and the `AbstractEffect` / `Context` / `Param` interface an effect implements (one
+module each in `_effects/`), the candidate terms `TERMS` with `term_effect` / `term_formula` that describe
 a mismatch as a formula, and `effect_params_from` (effect modules and parameter vectors from
 names and values)."""
 
@@ -9,6 +9,7 @@ from ._effects import (
     TERMS as TERMS,
     AbstractEffect as AbstractEffect,
     Context as Context,
+    Param as Param,
     get_effect as get_effect,
     register_effect as register_effect,
     term_effect as term_effect,

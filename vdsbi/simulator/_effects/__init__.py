@@ -6,7 +6,7 @@ import importlib
 import pkgutil
 
 from ._aero_drag import AeroDrag as AeroDrag
-from ._base import AbstractEffect as AbstractEffect, Context as Context
+from ._base import AbstractEffect as AbstractEffect, Context as Context, Param as Param
 from ._downforce import Downforce as Downforce
 from ._imu_lever_arm import ImuLeverArm as ImuLeverArm
 from ._imu_misalignment import ImuMisalignment as ImuMisalignment
@@ -34,7 +34,7 @@ from ._yaw_inertia import YawInertia as YawInertia
 #: at call time by everything that lists effects (simulation, identification, discovery).
 EFFECTS: dict[str, type[AbstractEffect]] = {}
 
-_METADATA = ("name", "param_names", "units", "null", "typical", "bounds", "start", "description")
+_METADATA = ("name", "params", "description")
 
 
 def get_effect(name: str) -> AbstractEffect:
@@ -44,30 +44,18 @@ def get_effect(name: str) -> AbstractEffect:
 
 
 def _check_metadata(cls: type[AbstractEffect]) -> None:
-    where = f"effects: {cls.__name__}"
+    """What the class definition cannot check: the attributes are there (its `params` records
+    were checked when it was defined)."""
     missing = [a for a in _METADATA if not hasattr(cls, a)]
     if missing:
-        raise ValueError(f"{where} lacks class attribute(s) {missing}")
-    n = len(cls.param_names)
-    if not len(cls.units) == len(cls.null) == len(cls.typical) == len(cls.bounds) == len(cls.start) == n:
-        raise ValueError(f"{where}: param_names, units, null, typical, bounds, start differ in length")
-    for p, (lo, hi), (t_lo, t_hi), x0 in zip(cls.param_names, cls.bounds, cls.typical, cls.start):
-        # A start on the edge of the box has no finite unbounded coordinate in the fit.
-        if not lo < x0 < hi:
-            raise ValueError(f"{where}: start of '{p}' ({x0}) must lie strictly inside bounds ({lo}, {hi})")
-        if not lo <= t_lo <= t_hi <= hi:
-            raise ValueError(f"{where}: typical range of '{p}' must lie inside its bounds")
-    unknown = [p for p in cls.steer_lag if p not in cls.param_names]
-    if unknown:
-        raise ValueError(f"{where}: steer_lag names {unknown}, not among its param_names")
+        raise ValueError(f"effects: {cls.__name__} lacks class attribute(s) {missing}")
 
 
 def register_effect(cls: type[AbstractEffect]) -> type[AbstractEffect]:
     """Add an effect class to `EFFECTS` under `cls.name` (usable as a class decorator).
 
-    Checks the class's metadata (see `AbstractEffect`). An effect registered here is
-    simulated, identified and searched for by discovery like a built-in one. Raises
-    ValueError on a duplicate name or incomplete or inconsistent metadata.
+    An effect registered here is simulated, identified and searched for by discovery like a
+    built-in one. Raises ValueError on a duplicate name or missing metadata.
     """
     _check_metadata(cls)
     if cls.name in EFFECTS and EFFECTS[cls.name] is not cls:

@@ -32,19 +32,59 @@ class Context(NamedTuple):
     ay: Float[Array, ""] | float = 0.0
 
 
+class Param(NamedTuple):
+    """One parameter of an effect.
+
+    Attributes:
+        name: its name within the effect (``tau``); files name it ``effect.name``.
+        unit: its unit.
+        null: the value at which the effect vanishes (the base model exactly).
+        typical: (low, high) magnitudes met on real cars, used to simulate the effect and as the
+            parameter's scale in Fisher information.
+        bounds: (low, high) box inside which discovery fits it, wider than `typical` so an
+            estimate is not pinned by the bound (physical sign constraints where they exist).
+        start: where a fit starts when the effect is switched on, strictly inside `bounds`.
+    """
+
+    name: str
+    unit: str
+    null: float
+    typical: tuple[float, float]
+    bounds: tuple[float, float]
+    start: float
+
+
+def _check_params(cls) -> None:
+    """An effect's parameter records are consistent: checked when its class is defined."""
+    where = f"effects: {cls.__name__}"
+    for p in cls.params:
+        if not isinstance(p, Param):
+            raise ValueError(f"{where}: params must be Param records, got {p!r}")
+        (lo, hi), (t_lo, t_hi) = p.bounds, p.typical
+        # A start on the edge of the box has no finite unbounded coordinate in the fit.
+        if not lo < p.start < hi:
+            raise ValueError(
+                f"{where}: start of '{p.name}' ({p.start}) must lie strictly inside bounds ({lo}, {hi})"
+            )
+        if not lo <= t_lo <= t_hi <= hi:
+            raise ValueError(f"{where}: typical range of '{p.name}' must lie inside its bounds")
+    names = [p.name for p in cls.params]
+    if len(set(names)) != len(names):
+        raise ValueError(f"{where}: parameter names {names} repeat")
+    unknown = [p for p in cls.steer_lag if p not in names]
+    if unknown:
+        raise ValueError(f"{where}: steer_lag names {unknown}, not among its params")
+
+
 class AbstractEffect(eqx.Module):
     """A physics effect left out of the base model.
 
-    Class attributes describe the effect and its parameters, one entry per parameter:
+    Class attributes describe the effect:
 
-    - `param_names`, their `units`;
-    - `null`: the values at which the effect vanishes (the base model exactly);
-    - `typical`: (low, high) magnitudes met on real cars, used to simulate the effect and as
-      the scale of its parameters in Fisher information;
-    - `bounds`: (low, high) box inside which discovery fits the parameter, wider than
-      `typical` so an estimate is not pinned by the bound (physical sign constraints where
-      they exist);
-    - `start`: where a fit starts when the effect is switched on, strictly inside `bounds`.
+    - `name` and a one-line `description`;
+    - `params`: one `Param` record per parameter (name, unit, null, typical, bounds, start),
+      checked when the class is defined; `param_names`, `units`, `null`, `typical`, `bounds` and
+      `start` are their columns, one entry per parameter;
     - `searched`: whether discovery's search includes it (default True).
     - `adds_load`: whether `vertical_load` can load the tyres beyond the car's weight
       (default False): the grip a drive used then bounds no friction factor from below.
@@ -52,21 +92,38 @@ class AbstractEffect(eqx.Module):
     - `steer_lag`: the names of its parameters that are a lag of the car's response behind the
       logged steer, s (default none): a fit starts them at the lag the recording shows.
 
-    `register_effect` checks them. Hooks receive `p`, the effect's parameter vector.
+    Hooks receive `p`, the effect's parameter vector in `params`' order.
     """
 
     name: AbstractClassVar[str]
-    param_names: AbstractClassVar[tuple[str, ...]]
-    units: AbstractClassVar[tuple[str, ...]]
-    null: AbstractClassVar[tuple[float, ...]]
-    typical: AbstractClassVar[tuple[tuple[float, float], ...]]
-    bounds: AbstractClassVar[tuple[tuple[float, float], ...]]
-    start: AbstractClassVar[tuple[float, ...]]
+    params: AbstractClassVar[tuple[Param, ...]]
     description: AbstractClassVar[str]
     num_states: ClassVar[int] = 0
     searched: ClassVar[bool] = True
     adds_load: ClassVar[bool] = False
     steer_lag: ClassVar[tuple[str, ...]] = ()
+    # The records' columns, set from `params` when a class is defined.
+    param_names: ClassVar[tuple[str, ...]]
+    units: ClassVar[tuple[str, ...]]
+    null: ClassVar[tuple[float, ...]]
+    typical: ClassVar[tuple[tuple[float, float], ...]]
+    bounds: ClassVar[tuple[tuple[float, float], ...]]
+    start: ClassVar[tuple[float, ...]]
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if "params" not in cls.__dict__ and "steer_lag" not in cls.__dict__:
+            return
+        if not hasattr(cls, "params"):
+            raise ValueError(f"effects: {cls.__name__} names steer_lag but has no params")
+        _check_params(cls)
+        ps = cls.params
+        cls.param_names = tuple(p.name for p in ps)
+        cls.units = tuple(p.unit for p in ps)
+        cls.null = tuple(float(p.null) for p in ps)
+        cls.typical = tuple(tuple(map(float, p.typical)) for p in ps)
+        cls.bounds = tuple(tuple(map(float, p.bounds)) for p in ps)
+        cls.start = tuple(float(p.start) for p in ps)
 
     @classmethod
     def prior_bounds(cls, grip: float | None, extra_load: bool = False) -> tuple[tuple[float, float], ...]:

@@ -1,4 +1,4 @@
-from ._base import AbstractEffect
+from ._base import AbstractEffect, Param
 
 #: Speed at which `Downforce.coef` is stated, m/s (180 km/h: a race car's fast corners).
 REFERENCE_SPEED = 50.0
@@ -17,13 +17,11 @@ class Downforce(AbstractEffect):
     """
 
     name = "downforce"
-    param_names = ("coef", "balance_front")
-    units = ("-", "-")
     # At coef = 0 the balance moves nothing: 0.5 is only where it sits.
-    null = (0.0, 0.5)
-    typical = ((0.3, 2.0), (0.35, 0.55))
-    bounds = ((0.0, 3.0), (0.2, 0.8))
-    start = (0.3, 0.5)
+    params = (
+        Param("coef", "-", null=0.0, typical=(0.3, 2.0), bounds=(0.0, 3.0), start=0.3),
+        Param("balance_front", "-", null=0.5, typical=(0.35, 0.55), bounds=(0.2, 0.8), start=0.5),
+    )
     description = "aerodynamic downforce (tyre load and grip grow with speed², unseen by the IMU)"
     adds_load = True
 

@@ -1,6 +1,6 @@
 import jax.numpy as jnp
 
-from ._base import AbstractEffect
+from ._base import AbstractEffect, Param
 
 
 class ImuMisalignment(AbstractEffect):
@@ -11,12 +11,10 @@ class ImuMisalignment(AbstractEffect):
     """
 
     name = "imu_misalignment"
-    param_names = ("roll", "yaw")
-    units = ("rad", "rad")
-    null = (0.0, 0.0)
-    typical = ((-0.05, 0.05), (-0.05, 0.05))
-    bounds = ((-0.15, 0.15), (-0.15, 0.15))
-    start = (0.0, 0.0)
+    params = (
+        Param("roll", "rad", null=0.0, typical=(-0.05, 0.05), bounds=(-0.15, 0.15), start=0.0),
+        Param("yaw", "rad", null=0.0, typical=(-0.05, 0.05), bounds=(-0.15, 0.15), start=0.0),
+    )
     description = "IMU mounted rotated (roll: constant ay offset; yaw: ax leaks into ay)"
 
     def measure(self, p, y, ctx):

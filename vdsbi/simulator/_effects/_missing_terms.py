@@ -17,7 +17,7 @@ from typing import Literal, NamedTuple
 
 import jax.numpy as jnp
 
-from ._base import AbstractEffect
+from ._base import AbstractEffect, Param
 
 #: Time constant of the filter whose output gives the steer rate (δ − δ_f)/τ, s.
 RATE_FILTER_TAU = 0.02
@@ -109,15 +109,10 @@ def _feature(name: str, sig: dict):
 
 
 class _TermEffect(AbstractEffect):
-    """c·f for the terms in `param_names` (set by `term_effect`)."""
+    """c·f for the terms in `params` (set by `term_effect`)."""
 
     name = "discovered_terms"
-    param_names = ()
-    units = ()
-    null = ()
-    typical = ()
-    bounds = ()
-    start = ()
+    params = ()
     description = "terms outside the library, found by sparse selection"
     num_states = 1  # the filtered steer, for δ̇
 
@@ -164,15 +159,11 @@ def term_effect(keys) -> type[AbstractEffect]:
     unknown = [k for k in keys if k not in TERMS]
     if unknown:
         raise ValueError(f"term_effect: unknown term(s) {unknown} (known: {', '.join(TERMS)})")
-    attrs = {
-        "name": "discovered_terms",
-        "param_names": keys,
-        "units": tuple(TERMS[k].unit for k in keys),
-        "null": tuple(0.0 for _ in keys),
-        "typical": tuple((-TERMS[k].bound / 5, TERMS[k].bound / 5) for k in keys),
-        "bounds": tuple((-TERMS[k].bound, TERMS[k].bound) for k in keys),
-        "start": tuple(0.0 for _ in keys),
-    }
+    params = tuple(
+        Param(k, TERMS[k].unit, null=0.0, typical=(-b / 5, b / 5), bounds=(-b, b), start=0.0)
+        for k, b in ((k, TERMS[k].bound) for k in keys)
+    )
+    attrs = {"name": "discovered_terms", "params": params}
     return type("DiscoveredTerms", (_TermEffect,), attrs)
 
 

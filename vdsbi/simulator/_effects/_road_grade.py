@@ -1,18 +1,13 @@
 import jax.numpy as jnp
 
-from ._base import AbstractEffect
+from ._base import AbstractEffect, Param
 
 
 class RoadGrade(AbstractEffect):
     """Constant road grade θ_g (> 0 uphill): −g·sin θ_g along body x, not felt by the IMU."""
 
     name = "road_grade"
-    param_names = ("grade",)
-    units = ("rad",)
-    null = (0.0,)
-    typical = ((-0.06, 0.06),)
-    bounds = ((-0.15, 0.15),)
-    start = (0.0,)
+    params = (Param("grade", "rad", null=0.0, typical=(-0.06, 0.06), bounds=(-0.15, 0.15), start=0.0),)
     description = "road grade (gravity along x: speed changes the accelerometer does not see)"
 
     def gravity_accel(self, p, ctx):

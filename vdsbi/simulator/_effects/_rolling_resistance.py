@@ -1,6 +1,6 @@
 import jax.numpy as jnp
 
-from ._base import AbstractEffect
+from ._base import AbstractEffect, Param
 
 
 class RollingResistance(AbstractEffect):
@@ -11,12 +11,7 @@ class RollingResistance(AbstractEffect):
     """
 
     name = "rolling_resistance"
-    param_names = ("c_rr",)
-    units = ("-",)
-    null = (0.0,)
-    typical = ((0.005, 0.03),)
-    bounds = ((0.0, 0.08),)
-    start = (0.004,)
+    params = (Param("c_rr", "-", null=0.0, typical=(0.005, 0.03), bounds=(0.0, 0.08), start=0.004),)
     description = "rolling resistance (constant drag ∝ load, felt by the accelerometer)"
 
     def wheel_torque(self, p, ctx):

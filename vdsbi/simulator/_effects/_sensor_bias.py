@@ -1,16 +1,15 @@
-from ._base import AbstractEffect
+from ._base import AbstractEffect, Param
 
 
 class SensorBias(AbstractEffect):
     """Constant offsets on the IMU channels."""
 
     name = "sensor_bias"
-    param_names = ("ax", "ay", "yaw_rate")
-    units = ("m/s^2", "m/s^2", "rad/s")
-    null = (0.0, 0.0, 0.0)
-    typical = ((-0.5, 0.5), (-0.5, 0.5), (-0.02, 0.02))
-    bounds = ((-2.0, 2.0), (-2.0, 2.0), (-0.08, 0.08))
-    start = (0.0, 0.0, 0.0)
+    params = (
+        Param("ax", "m/s^2", null=0.0, typical=(-0.5, 0.5), bounds=(-2.0, 2.0), start=0.0),
+        Param("ay", "m/s^2", null=0.0, typical=(-0.5, 0.5), bounds=(-2.0, 2.0), start=0.0),
+        Param("yaw_rate", "rad/s", null=0.0, typical=(-0.02, 0.02), bounds=(-0.08, 0.08), start=0.0),
+    )
     description = "IMU offsets (constant shift of ax, ay, yaw_rate without dynamics)"
 
     def measure(self, p, y, ctx):

@@ -1,4 +1,4 @@
-from ._base import AbstractEffect
+from ._base import AbstractEffect, Param
 
 
 class SensorScale(AbstractEffect):
@@ -10,12 +10,11 @@ class SensorScale(AbstractEffect):
     """
 
     name = "sensor_scale"
-    param_names = ("ax", "ay", "yaw_rate")
-    units = ("-", "-", "-")
-    null = (0.0, 0.0, 0.0)
-    typical = ((-0.05, 0.05), (-0.05, 0.05), (-0.05, 0.05))
-    bounds = ((-0.3, 0.3), (-0.3, 0.3), (-0.3, 0.3))
-    start = (0.0, 0.0, 0.0)
+    params = (
+        Param("ax", "-", null=0.0, typical=(-0.05, 0.05), bounds=(-0.3, 0.3), start=0.0),
+        Param("ay", "-", null=0.0, typical=(-0.05, 0.05), bounds=(-0.3, 0.3), start=0.0),
+        Param("yaw_rate", "-", null=0.0, typical=(-0.05, 0.05), bounds=(-0.3, 0.3), start=0.0),
+    )
     description = "IMU scale factors (ax, ay, yaw_rate read (1 + e) times the true value)"
 
     def measure(self, p, y, ctx):

@@ -1,6 +1,6 @@
 import jax.numpy as jnp
 
-from ._base import AbstractEffect
+from ._base import AbstractEffect, Param
 
 #: Smallest delay the Padé poles are placed for, s: they sit at |λ| = √12/d, so RK4 at 5 ms is
 #: stable above it.
@@ -27,12 +27,7 @@ class SignalDelay(AbstractEffect):
     """
 
     name = "signal_delay"
-    param_names = ("delay",)
-    units = ("s",)
-    null = (0.0,)
-    typical = ((0.02, 0.15),)
-    bounds = ((0.01, 0.4),)
-    start = (0.04,)
+    params = (Param("delay", "s", null=0.0, typical=(0.02, 0.15), bounds=(0.01, 0.4), start=0.04),)
     steer_lag = ("delay",)
     description = "inputs and measurements out of step by a pure delay (latency of sensors or bus)"
     num_states = 6

@@ -1,17 +1,12 @@
-from ._base import AbstractEffect
+from ._base import AbstractEffect, Param
 
 
 class SteerOffset(AbstractEffect):
     """Constant offset δ₀ between the recorded and the acting road-wheel angle: δ = δ_rec + δ₀."""
 
     name = "steer_offset"
-    param_names = ("offset",)
-    units = ("rad",)
-    null = (0.0,)
     # Road-wheel angle: a steering-wheel sensor's zero a degree or two off, over a ratio of ~15.
-    typical = ((-0.005, 0.005),)
-    bounds = ((-0.03, 0.03),)
-    start = (0.0,)
+    params = (Param("offset", "rad", null=0.0, typical=(-0.005, 0.005), bounds=(-0.03, 0.03), start=0.0),)
     # identify adds it where a drive shows it (`default_effects`); as a discovery candidate it
     # would have to be told from road_bank, which also turns the car at a steer of zero.
     searched = False

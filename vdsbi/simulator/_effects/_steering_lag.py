@@ -1,6 +1,6 @@
 import jax.numpy as jnp
 
-from ._base import AbstractEffect
+from ._base import AbstractEffect, Param
 
 #: Smallest time constant used, s: keeps the lag state stable for RK4 at the default 2.5 ms step.
 TAU_FLOOR = 1e-3
@@ -10,12 +10,7 @@ class SteeringLag(AbstractEffect):
     """First-order lag between recorded and acting road-wheel angle, time constant τ."""
 
     name = "steering_lag"
-    param_names = ("tau",)
-    units = ("s",)
-    null = (0.0,)
-    typical = ((0.03, 0.3),)
-    bounds = ((0.005, 0.8),)
-    start = (0.04,)
+    params = (Param("tau", "s", null=0.0, typical=(0.03, 0.3), bounds=(0.005, 0.8), start=0.04),)
     steer_lag = ("tau",)
     description = "steering actuator/compliance lag (yaw and ay lag the recorded steer)"
     num_states = 1

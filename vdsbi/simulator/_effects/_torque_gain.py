@@ -1,4 +1,4 @@
-from ._base import AbstractEffect
+from ._base import AbstractEffect, Param
 
 
 class TorqueGain(AbstractEffect):
@@ -10,12 +10,7 @@ class TorqueGain(AbstractEffect):
     """
 
     name = "torque_gain"
-    param_names = ("gain",)
-    units = ("-",)
-    null = (1.0,)
-    typical = ((0.8, 1.2),)
-    bounds = ((0.4, 1.8),)
-    start = (1.0,)
+    params = (Param("gain", "-", null=1.0, typical=(0.8, 1.2), bounds=(0.4, 1.8), start=1.0),)
     description = "commanded torque is not applied torque (gain of actuator and driveline)"
 
     def inputs(self, p, z, u):

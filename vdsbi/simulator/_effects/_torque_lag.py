@@ -1,6 +1,6 @@
 import jax.numpy as jnp
 
-from ._base import AbstractEffect
+from ._base import AbstractEffect, Param
 from ._steering_lag import TAU_FLOOR
 
 
@@ -8,12 +8,7 @@ class TorqueLag(AbstractEffect):
     """First-order lag between recorded (commanded) and acting axle torques, time constant τ."""
 
     name = "torque_lag"
-    param_names = ("tau",)
-    units = ("s",)
-    null = (0.0,)
-    typical = ((0.05, 0.5),)
-    bounds = ((0.005, 1.2),)
-    start = (0.05,)
+    params = (Param("tau", "s", null=0.0, typical=(0.05, 0.5), bounds=(0.005, 1.2), start=0.05),)
     description = "powertrain/brake actuator lag (ax and wheel speeds lag the recorded torque)"
     num_states = 2
 

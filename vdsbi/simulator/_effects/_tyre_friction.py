@@ -1,6 +1,6 @@
 from typing import ClassVar
 
-from ._base import AbstractEffect
+from ._base import AbstractEffect, Param
 
 
 class TyreFriction(AbstractEffect):
@@ -18,12 +18,10 @@ class TyreFriction(AbstractEffect):
     """
 
     name = "tyre_friction"
-    param_names = ("scale_front", "scale_rear")
-    units = ("-", "-")
-    null = (1.0, 1.0)
-    typical = ((0.7, 1.5), (0.7, 1.5))
-    bounds = ((0.4, 1.8), (0.4, 1.8))
-    start = (1.0, 1.0)
+    params = (
+        Param("scale_front", "-", null=1.0, typical=(0.7, 1.5), bounds=(0.4, 1.8), start=1.0),
+        Param("scale_rear", "-", null=1.0, typical=(0.7, 1.5), bounds=(0.4, 1.8), start=1.0),
+    )
     description = "road friction differs from vehicle.json's (saturation at the limit of adhesion)"
     grip_margin: ClassVar[float] = 1.25
     grip_floor: ClassVar[float] = 0.9

@@ -1,4 +1,4 @@
-from ._base import AbstractEffect
+from ._base import AbstractEffect, Param
 
 
 class YawInertia(AbstractEffect):
@@ -11,12 +11,7 @@ class YawInertia(AbstractEffect):
     """
 
     name = "yaw_inertia"
-    param_names = ("dynamic_index",)
-    units = ("-",)
-    null = (1.0,)
-    typical = ((0.75, 1.15),)
-    bounds = ((0.4, 2.0),)
-    start = (1.0,)
+    params = (Param("dynamic_index", "-", null=1.0, typical=(0.75, 1.15), bounds=(0.4, 2.0), start=1.0),)
     description = "yaw inertia differs from m·l_f·l_r (the car's dynamic index k ≠ 1)"
 
     def yaw_inertia_scale(self, p):
