@@ -7,10 +7,10 @@ to one width). The effects, their fit bounds and starting values are read from t
 (`vdsbi.simulator.effects.EFFECTS`, each effect's `bounds` and `start`) when a `Fitter` is built, so an
 effect added with `register_effect` is searched like a built-in one.
 
-A `DiscoveryFit` is the estimator's posterior seen in the search's layout: the unbounded vector
-z = [z_θ (6), z_v0 (W), z_effects (E)], the residual whitened by the sensor noise (what the
-misspecification test holds against noise), and the per-channel residual and noise model the
-evidence is computed with (`vdsbi.discovery._rank`).
+A `DiscoveryFit` is the estimator's posterior seen in the search's coordinates: a `Point` (θ,
+the start-speed offsets and every effect's parameters, unbounded), the residual whitened by the
+sensor noise (what the misspecification test holds against noise), and the per-channel residual
+and noise model the evidence is computed with (`vdsbi.discovery._rank`).
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
 from ..estimation import ModelError, SensorNoise, fit_likelihood
@@ -31,6 +32,7 @@ from ..simulator.effects import EFFECTS
 from ..simulator.models import AbstractVehicleModel, LongitudinalMode, model_class
 from ..simulator.solvers import Solver
 from ._candidates import EffectSpace, effect_space
+from ._point import Point, Space, free_positions, positions
 from ._results import DiscoveryFit
 
 #: Prior std of the initial speed of a window the fit did not see, m/s.
@@ -52,30 +54,6 @@ def super_model(
     return model_class(longitudinal)(vehicle=vehicle, effects=mods)
 
 
-class Space(eqx.Module):
-    """Maps the unbounded vector z = [z_θ (6), z_v0 (W), z_effects (E)] to physical values.
-
-    Attributes:
-        theta: the prior box of θ.
-        effects: the fit box of every effect parameter, flat.
-        null: (E,) values at which each effect vanishes.
-        slices: each effect's (start, stop) in the flat effect vector.
-    """
-
-    theta: Box
-    effects: Box
-    null: Float[Array, " E"]
-    slices: tuple[tuple[int, int], ...] = eqx.field(static=True)
-
-    def split(self, z, num_windows: int):
-        return z[:6], z[6 : 6 + num_windows], z[6 + num_windows :]
-
-    def effect_params(self, z_eff, active) -> tuple[jax.Array, ...]:
-        """One parameter vector per effect; inactive ones at their null values."""
-        flat = jnp.where(active, self.effects.from_unbounded(z_eff), self.null)
-        return tuple(flat[a:b] for a, b in self.slices)
-
-
 def make_space(vehicle: Vehicle, effects: EffectSpace) -> Space:
     names = parameter_names([effects.classes[e] for e in effects.names])[len(PARAM_NAMES) :]
     return Space(
@@ -95,15 +73,15 @@ class _Target(eqx.Module):
     mask: Float[Array, "W K"]
 
 
-def _readings(wm: WindowedModel, space: Space, z, active) -> Float[Array, "W K C"]:
+def _readings(wm: WindowedModel, space: Space, z: Point, active) -> Float[Array, "W K C"]:
     """The compared samples of every window at z; each window starts from its measured speed
     plus its fitted offset."""
-    zt, zv, ze = space.split(z, wm.v0.shape[0])
-    ys, _ = wm(space.theta.from_unbounded(zt), space.effect_params(ze, active), v0=wm.v0 + zv)
+    theta, effect_params = space.physical(z, active)
+    ys, _ = wm(theta, effect_params, v0=wm.v0 + z.v0)
     return ys
 
 
-def whitened(space: Space, target: _Target, z, active):
+def whitened(space: Space, target: _Target, z: Point, active):
     r = (_readings(target.wm, space, z, active) - target.measured) / target.sigma
     r = jnp.where(target.mask[:, :, None] > 0, r, 0.0)
     return r.reshape(-1)
@@ -123,11 +101,12 @@ def _take(z, free):
 
 
 @eqx.filter_jit
-def _linearised(wm, space, z, active, free):
-    """The readings at z and ∂readings/∂z[free] for padded `free` (`_padded`: its slots give zero
-    columns); one program serves predictions and their variances."""
-    fn = lambda y: (r := _readings(wm, space, z.at[free].set(y, mode="drop"), active), r)
-    jac, readings = jax.jacfwd(fn, has_aux=True)(_take(z, free))
+def _linearised(wm, space, z: Point, active, free):
+    """The readings at z and their derivative by z's flattened entries `free` (padded:
+    `_padded`, its slots give zero columns); one program serves predictions and their variances."""
+    flat, unravel = ravel_pytree(z)
+    fn = lambda y: (r := _readings(wm, space, unravel(flat.at[free].set(y, mode="drop")), active), r)
+    jac, readings = jax.jacfwd(fn, has_aux=True)(_take(flat, free))
     return readings, jac
 
 
@@ -167,9 +146,9 @@ class Fitter:
         )
         w = train.num_windows
         self.num_windows = w
-        self.num_params = 6 + w + self.effects.num_params
+        self.num_params = len(PARAM_NAMES) + w + self.effects.num_params
         most = self.effects.max_pair_params if free_effects is None else int(free_effects)
-        self.width = 6 + w + most
+        self.width = len(PARAM_NAMES) + w + most
         self.num_residuals = int(train.train.sum()) * len(train.channels)
         e = self.effects
         self._z_eff_start = np.asarray(self.space.effects.to_unbounded(e.start, edge=EDGE))
@@ -183,19 +162,14 @@ class Fitter:
         """The super-model over the windows of `problem`."""
         return windowed_model(problem, solver=self.solver, model=self.model)
 
-    def initial_z(self, theta0: np.ndarray | None = None) -> np.ndarray:
+    def initial_z(self, theta0: np.ndarray | None = None) -> Point:
         prior = self.vehicle.default_prior()
         if theta0 is None:
             # Middle of the prior box in z (geometric for the stiffnesses).
             theta0 = np.array([np.sqrt(prior[n][0] * prior[n][1]) for n in PARAM_NAMES])
-            theta0[0] = 0.5 * (prior["l_f"][0] + prior["l_f"][1])
+            theta0[PARAM_NAMES.index("l_f")] = 0.5 * (prior["l_f"][0] + prior["l_f"][1])
         zt = np.asarray(self.space.theta.to_unbounded(np.asarray(theta0, float), edge=EDGE))
-        return np.concatenate([zt, np.zeros(self.num_windows), self._z_eff_start])
-
-    def _effect_index(self, effect: str) -> np.ndarray:
-        """Indices in z of an effect's parameters."""
-        s = self.effects.slices[effect]
-        return 6 + self.num_windows + np.arange(s.start, s.stop)
+        return Point(zt, np.zeros(self.num_windows), self._z_eff_start.copy()).numpy()
 
     def active_mask(self, effects: Sequence[str]) -> np.ndarray:
         act = np.zeros(self.effects.num_params, dtype=bool)
@@ -203,45 +177,51 @@ class Fitter:
             act[self.effects.slices[e]] = True
         return act
 
+    def free_mask(self, effects: Sequence[str], fix_theta: bool = False, v0: bool = True) -> Point:
+        """The entries a fit of `effects` frees: θ (unless `fix_theta`), the start speeds (if
+        `v0`) and the effects' parameters."""
+        return Point(
+            np.full(len(PARAM_NAMES), not fix_theta),
+            np.full(self.num_windows, v0),
+            self.active_mask(effects),
+        )
+
     def free_index(self, effects: Sequence[str], fix_theta: bool = False) -> np.ndarray:
-        w = self.num_windows
-        idx = [] if fix_theta else list(range(6))
-        idx += list(range(6, 6 + w))
-        for e in effects:
-            idx += self._effect_index(e).tolist()
-        return np.asarray(idx, dtype=int)
+        """`free_mask`'s entries as indices in the flattened point."""
+        return free_positions(self.free_mask(effects, fix_theta))
+
+    def effect_positions(self, effect: str) -> np.ndarray:
+        """Indices in the flattened point of an effect's parameters."""
+        return positions(self.initial_z()).effects[self.effects.slices[effect]]
 
     def _on(self, problem: Problem | None):
-        """(z layout map, windows not fitted) for predictions on `problem`'s windows: each
-        index of the fitted z and where it sits in that problem's z; and the indices there
-        of the initial-speed offsets of windows the fit did not see (at 0)."""
+        """(where the fitted point's entries sit in the flattened point on `problem`'s windows,
+        the indices there of the start-speed offsets of windows the fit did not see (at 0))."""
         if problem is None:
             return None, np.zeros(0, int)
-        w, wt = self.num_windows, problem.num_windows
+        where = self._windows_on(problem)
+        target = positions(self._z_on(self.initial_z(), problem))
+        to = Point(target.theta, target.v0[where], target.effects)
+        unseen = np.setdiff1d(target.v0, target.v0[where])
+        return np.concatenate(jax.tree.leaves(to)), unseen
+
+    def _windows_on(self, problem: Problem) -> np.ndarray:
+        """Where each fitted window sits among `problem`'s windows."""
         where = {win: j for j, win in enumerate(problem.windows)}
         missing = [win for win in self.problem.windows if win not in where]
         if missing:
             raise ValueError(f"predict: fitted windows {missing} are not windows of the problem")
-        to = np.concatenate(
-            [
-                np.arange(6),
-                6 + np.array([where[win] for win in self.problem.windows], dtype=int),
-                6 + wt + np.arange(self.effects.num_params),
-            ]
-        )
-        fitted = set(to[6 : 6 + w].tolist())
-        unseen = np.array([6 + j for j in range(wt) if 6 + j not in fitted], dtype=int)
-        return to, unseen
+        return np.array([where[win] for win in self.problem.windows], dtype=int)
 
-    def _z_on(self, z, problem: Problem | None) -> np.ndarray:
-        to, _ = self._on(problem)
-        if to is None:
-            return np.asarray(z)
-        out = np.zeros(6 + problem.num_windows + self.effects.num_params)
-        out[to] = z
-        return out
+    def _z_on(self, z: Point, problem: Problem | None) -> Point:
+        """z on `problem`'s windows: windows the fit did not see start from their measured speed."""
+        if problem is None:
+            return z
+        v0 = np.zeros(problem.num_windows)
+        v0[self._windows_on(problem)] = z.v0
+        return Point(z.theta, v0, z.effects)
 
-    def predict(self, z, effects: Sequence[str], problem: Problem | None = None) -> np.ndarray:
+    def predict(self, z: Point, effects: Sequence[str], problem: Problem | None = None) -> np.ndarray:
         """(W, K, C) noise-free compared samples of the windows of `problem` (default: the
         fitted ones, truncated after the last training sample); windows the fit did not see
         start from their measured speed."""
@@ -252,9 +232,10 @@ class Fitter:
         fitted windows; `free` indexes z on `problem`'s windows."""
         act = jnp.asarray(self.active_mask(effects))
         wm = self.target.wm if problem is None else self.windowed(problem)
-        z = jnp.asarray(self._z_on(z, problem))
+        z = self._z_on(z, problem).jax()
         width = self.width + (0 if problem is None else problem.num_windows - self.num_windows)
-        index = jnp.asarray(_padded(np.asarray(free, int), width, z.size))
+        size = sum(leaf.size for leaf in jax.tree.leaves(z))
+        index = jnp.asarray(_padded(np.asarray(free, int), width, size))
         readings, jac = _linearised(wm, self.space, z, act, index)
         return np.asarray(readings), np.asarray(jac)[..., : len(free)]
 
@@ -291,19 +272,18 @@ class Fitter:
         search's candidates weighed alike).
         """
         effects = tuple(effects)
-        z = self.initial_z() if z0 is None else np.array(z0, dtype=float)
+        z = self.initial_z() if z0 is None else z0.numpy()
         for e in effects:
-            i = self._effect_index(e)
-            if z0 is None or not np.isfinite(z[i]).all():
-                z[i] = self._z_eff_start[self.effects.slices[e]]
-        w = self.num_windows
-        zt, zv, ze = z[:6], z[6 : 6 + w], z[6 + w :]
+            i = self.effects.slices[e]
+            if z0 is None or not np.isfinite(z.effects[i]).all():
+                z.effects[i] = self._z_eff_start[i]
         act = self.active_mask(effects)
-        eff = np.where(act, np.asarray(self.space.effects.from_unbounded(ze)), self.effects.null)
-        start = np.concatenate([np.asarray(self.space.theta.from_unbounded(zt)), eff])
-        names = self.box.names
-        free = ([] if fix_theta else list(PARAM_NAMES)) + [names[6 + i] for i in np.flatnonzero(act)]
-        problem = dataclasses.replace(self.problem, v0=np.asarray(self.problem.v0) + zv)
+        eff = np.where(act, np.asarray(self.space.effects.from_unbounded(z.effects)), self.effects.null)
+        start = np.concatenate([np.asarray(self.space.theta.from_unbounded(z.theta)), eff])
+        free = ([] if fix_theta else list(PARAM_NAMES)) + [
+            self.space.effects.names[i] for i in np.flatnonzero(act)
+        ]
+        problem = dataclasses.replace(self.problem, v0=np.asarray(self.problem.v0) + z.v0)
         post = fit_likelihood(
             problem,
             start,
@@ -313,41 +293,49 @@ class Fitter:
             noise=noise,
             max_steps=max_iter,
             solver=self.solver,
-            width=self.width - w,
+            width=self.width - self.num_windows,
         )
-        return self._result(effects, z, post, act)
+        return self._result(effects, z, post)
 
-    def _result(self, effects, z, post, act) -> DiscoveryFit:
-        """`post` in the search's layout (see the module docstring)."""
-        w, z = self.num_windows, z.copy()
-        idx = np.asarray([post.names.index(n) for n in post.free], dtype=int)
-        n_t = int(np.sum(idx < 6))
-        corrected = post.jacobian.shape[-1] > len(idx)
-        z[idx[:n_t]] = post.z[idx[:n_t]]
-        z[6 + w + idx[n_t:] - 6] = post.z[idx[n_t:]]
+    def _result(self, effects, z: Point, post) -> DiscoveryFit:
+        """`post` (in the estimator's box: θ, then the effects' parameters) as a `DiscoveryFit`."""
+        nt = len(PARAM_NAMES)
+        fitted = [post.names.index(n) for n in post.free]
+        it = np.array([i for i in fitted if i < nt], dtype=int)  # free θ, in the box
+        ie = np.array([i - nt for i in fitted if i >= nt], dtype=int)  # free effect entries
+        corrected = post.jacobian.shape[-1] > len(fitted)
+        z.theta[it] = post.z[it]
+        z.effects[ie] = post.z[nt + ie]
         if corrected:
-            z[6 : 6 + w] += post.v0_offset
+            z.v0[:] += post.v0_offset
+        mask = Point(
+            np.isin(np.arange(nt), it),
+            np.full(self.num_windows, corrected),
+            np.isin(np.arange(z.effects.size), ie),
+        )
+        free = free_positions(mask)
+        # The estimator's columns are (free θ, free effects, start speeds); the point's order is
+        # (θ, start speeds, effects).
+        k_t, k_e = it.size, ie.size
+        k_v = post.jacobian.shape[-1] - k_t - k_e
+        jac_t, jac_e, jac_v = np.split(post.jacobian, [k_t, k_t + k_e], axis=-1)
         sigma = np.asarray(self.problem.sigma, float)
-        jac_t, jac_e = post.jacobian[..., :n_t], post.jacobian[..., n_t : len(idx)]
-        jac_v = post.jacobian[..., len(idx) :]
-        free = np.concatenate([idx[:n_t], 6 + np.arange(w if corrected else 0), 6 + w + idx[n_t:] - 6])
         jac = np.concatenate([jac_t, jac_v, jac_e], axis=-1) / sigma[:, None]
         # The start speeds' variances from their own information (each moves its own window).
         std = post.noise.std
         var_v = 1.0 / (np.sum((jac_v / std[:, None]) ** 2, axis=(1, 2)).diagonal() + V0_PRIOR_STD**-2)
-        cov_te = post.cov_z[np.ix_(idx, idx)]
+        te = np.r_[np.arange(k_t), k_t + k_v + np.arange(k_e)]
         cov = np.zeros((len(free),) * 2)
-        order = np.r_[np.arange(n_t), len(idx) + np.arange(jac_v.shape[-1]), n_t + np.arange(len(idx) - n_t)]
-        inv = np.argsort(order)
-        cov[np.ix_(inv[: len(idx)], inv[: len(idx)])] = cov_te
+        cov[np.ix_(te, te)] = post.cov_z[np.ix_(fitted, fitted)]
         if corrected:
-            cov[inv[len(idx) :], inv[len(idx) :]] = np.atleast_1d(var_v)
+            v = k_t + np.arange(k_v)
+            cov[v, v] = np.atleast_1d(var_v)
         sd = np.sqrt(np.clip(np.diag(post.cov_z), 0, None))
         theta_box, eff_box = self.space.theta, self.space.effects
-        theta = np.asarray(post.theta[:6])
-        theta_std = np.asarray(theta_box.dtheta_dz(post.z[:6])) * sd[:6]
-        ze = post.z[6:]
-        values, stds = np.asarray(eff_box.from_unbounded(ze)), np.asarray(eff_box.dtheta_dz(ze)) * sd[6:]
+        theta = np.asarray(post.theta[:nt])
+        theta_std = np.asarray(theta_box.dtheta_dz(post.z[:nt])) * sd[:nt]
+        ze = post.z[nt:]
+        values, stds = np.asarray(eff_box.from_unbounded(ze)), np.asarray(eff_box.dtheta_dz(ze)) * sd[nt:]
         params, spread = {}, {}
         for e in effects:
             s = self.effects.slices[e]
@@ -360,7 +348,7 @@ class Fitter:
             z=z,
             theta=theta,
             theta_std=theta_std,
-            v0=np.asarray(self.problem.v0) + z[6 : 6 + w],
+            v0=np.asarray(self.problem.v0) + z.v0,
             effect_params=params,
             effect_std=spread,
             chi2=float(np.sum(r**2)),
@@ -374,5 +362,5 @@ class Fitter:
             cov=cov,
             rss=np.sum(post.residual**2, axis=(0, 1)),
             noise=post.noise,
-            theta_interval=post.interval(0.9)[:6],
+            theta_interval=post.interval(0.9)[:nt],
         )

@@ -26,7 +26,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..simulator import PARAM_NAMES
 from ._candidates import LOOKALIKE_GROUPS, label
+from ._point import positions
 from ._results import DiscoveryFit, Ranked
 
 #: Log Bayes factor counted as strong evidence (odds 20:1).
@@ -218,7 +220,9 @@ def _lag_vs_stiffness(lag: Ranked, base: DiscoveryFit) -> dict:
     """steering_lag against a cornering-stiffness change: the share of the lag's signature in
     the span of the base fit's C_alpha_f, C_alpha_r Jacobian columns."""
     sig = lag.fit.residual - base.residual
-    cols = base.jacobian[:, [i for i, f in enumerate(base.free) if f in (4, 5)]]
+    theta = positions(base.z).theta
+    stiff = theta[[PARAM_NAMES.index("C_alpha_f"), PARAM_NAMES.index("C_alpha_r")]]
+    cols = base.jacobian[:, np.isin(base.free, stiff)]
     if cols.size and np.linalg.norm(sig) > 0:
         coef, *_ = np.linalg.lstsq(cols, sig, rcond=None)
         share = float(np.linalg.norm(cols @ coef) ** 2 / np.linalg.norm(sig) ** 2)

@@ -13,6 +13,7 @@ from ..problem import Problem
 
 if TYPE_CHECKING:  # annotations only (the fitter imports this module)
     from ._fit import Fitter
+    from ._point import Point
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -21,7 +22,7 @@ class DiscoveryFit:
 
     Attributes:
         effects: names of the active effects.
-        z: (P,) full unbounded parameter vector [z_θ (6), z_v0 (W), z_effects (E)].
+        z: the fit's `Point` (θ, start-speed offsets and every effect's parameters, unbounded).
         theta: (6,) θ in PARAM_NAMES order.
         theta_std: (6,) Laplace std of θ.
         v0: (W,) fitted initial speeds of the fitted windows, m/s.
@@ -32,7 +33,7 @@ class DiscoveryFit:
         num_params: number of free parameters K (θ, initial speeds, effect parameters).
         residual: (N,) residual whitened by the sensor noise, (W, K_t, C) flattened; masked entries 0.
         jacobian: (N, K) Jacobian of the residual along the free entries of z.
-        free: (K,) indices of the free entries of z.
+        free: (K,) indices of the free entries of z, flattened (`vdsbi.discovery._point.positions`).
         iterations: LM iterations used.
         converged: whether the relative cost change fell below tolerance.
         cov: (K, K) the estimator's covariance of the free entries of z (model error in its
@@ -43,7 +44,7 @@ class DiscoveryFit:
     """
 
     effects: tuple[str, ...]
-    z: np.ndarray
+    z: Point
     theta: np.ndarray
     theta_std: np.ndarray
     v0: np.ndarray

@@ -24,10 +24,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.flatten_util import ravel_pytree
 
 from ..simulator.effects import TERMS, term_effect, term_formula
 from ._candidates import effect_space
 from ._fit import Fitter, whitened
+from ._point import Point
 from ._rank import STRONG, bic_score, claim_limit, worst_channel
 from ._results import DiscoveryFit, TermDiscovery
 
@@ -35,21 +37,21 @@ TERM_EFFECT = "discovered_terms"
 
 
 @eqx.filter_jit
-def _jacobian(space, target, z, active, free):
-    fn = lambda y: whitened(space, target, z.at[free].set(y), active)
-    y0 = z[free]
+def _jacobian(space, target, z: Point, active, free):
+    """The whitened residual at z and its derivative by z's flattened entries `free`."""
+    flat, unravel = ravel_pytree(z)
+    fn = lambda y: whitened(space, target, unravel(flat.at[free].set(y)), active)
+    y0 = flat[free]
     return fn(y0), jax.jacfwd(fn)(y0)
 
 
-def _transfer(z_from: np.ndarray, src: Fitter, dst: Fitter, effects: Sequence[str]) -> np.ndarray:
-    """z in `dst`'s layout: θ, initial speeds and the `effects`' entries copied from `src`;
-    everything else at its starting value."""
+def _transfer(z_from: Point, src: Fitter, dst: Fitter, effects: Sequence[str]) -> Point:
+    """z in `dst`'s effect space: θ, start speeds and the `effects`' entries copied from `src`;
+    every other effect at its starting value."""
     z = dst.initial_z()
-    w = src.num_windows
-    z[: 6 + w] = z_from[: 6 + w]
     for e in effects:
-        z[dst._effect_index(e)] = z_from[src._effect_index(e)]
-    return z
+        z.effects[dst.effects.slices[e]] = z_from.effects[src.effects.slices[e]]
+    return Point(z_from.theta, z_from.v0, z.effects).numpy()
 
 
 def _chi2_after(r: np.ndarray, cols: np.ndarray) -> float:
@@ -92,12 +94,12 @@ def _rms_change(fitter: Fitter, fit: DiscoveryFit, effects, keys) -> dict:
     """Per term: RMS change of every fitted channel when its coefficient is set to 0."""
     problem = fitter.problem
     with_all = fitter.predict(fit.z, effects)
-    idx = fitter._effect_index(TERM_EFFECT)
+    idx = np.arange(fitter.effects.num_params)[fitter.effects.slices[TERM_EFFECT]]
     mask = problem.train
     out = {}
     for j, key in enumerate(keys):
-        z = fit.z.copy()
-        z[idx[j]] = 0.0  # the sigmoid's midpoint: c = 0 (symmetric bounds)
+        z = fit.z.numpy()
+        z.effects[idx[j]] = 0.0  # the sigmoid's midpoint: c = 0 (symmetric bounds)
         diff = with_all - fitter.predict(z, effects)
         out[key] = {
             ch: float(np.sqrt(np.mean(diff[..., c][mask] ** 2))) for c, ch in enumerate(problem.channels)
@@ -134,9 +136,9 @@ def discover_terms(
     screen = Fitter(problem, dt=dt, effects=effect_space(chosen, extra=(term_effect(keys),)))
     z0 = _transfer(library_fit.z, library_fitter, screen, chosen)
     base_free = screen.free_index(chosen)
-    free = np.concatenate([base_free, screen._effect_index(TERM_EFFECT)])
+    free = np.concatenate([base_free, screen.effect_positions(TERM_EFFECT)])
     act = jnp.asarray(screen.active_mask(effects))
-    r, jac = _jacobian(screen.space, screen.target, jnp.asarray(z0), act, jnp.asarray(free))
+    r, jac = _jacobian(screen.space, screen.target, z0.jax(), act, jnp.asarray(free))
     r, jac = np.asarray(r), np.asarray(jac)
     nb = len(base_free)
     picked, screened = select_terms(r, jac[:, :nb], jac[:, nb:], keys, max_terms)
