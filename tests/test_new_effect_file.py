@@ -13,23 +13,17 @@ from pathlib import Path
 
 import vdsbi
 
-#: The whole diff: one new file.
-TOY_EFFECT = '''
-import jax.numpy as jnp
-
-from ._base import AbstractEffect, Param
+ROOT = Path(__file__).resolve().parents[1]
 
 
-class TowPull(AbstractEffect):
-    """A constant rearward pull on the body, e.g. a trailer (felt by the accelerometer)."""
+def readme_effect() -> str:
+    """The effect module the README's "Adding an effect" prints: the whole diff, one new file."""
+    text = (ROOT / "README.md").read_text()
+    section = text[text.index("### Adding an effect") :]
+    return section[section.index("```python\n") + len("```python\n") : section.index("```\n", 10)]
 
-    name = "tow_pull"
-    params = (Param("force", "N", null=0.0, typical=(300.0, 2000.0), bounds=(0.0, 5000.0), start=100.0),)
-    description = "constant rearward pull"
 
-    def body_force(self, p, ctx):
-        return -p[0], jnp.zeros_like(p[0])
-'''
+TOY_EFFECT = readme_effect()
 
 SCRIPT = textwrap.dedent(
     """
