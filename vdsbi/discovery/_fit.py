@@ -25,7 +25,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
-from ..estimation import ModelError, SensorNoise, fit_likelihood
+from ..estimation import V0_STD, ModelError, SensorNoise, fit_likelihood
 from ..problem import Box, Problem, WindowedModel, parameter_names, windowed_model
 from ..simulator import PARAM_NAMES, Vehicle, make_model
 from ..simulator.effects import EFFECTS
@@ -35,8 +35,6 @@ from ._candidates import EffectSpace, effect_space
 from ._point import Point, Space, free_positions, positions
 from ._results import DiscoveryFit
 
-#: Prior std of the initial speed of a window the fit did not see, m/s.
-V0_PRIOR_STD = 1.0
 #: Unit-box coordinates of starting values are clipped to [EDGE, 1 − EDGE] before the logit.
 EDGE = 1e-9
 
@@ -242,14 +240,14 @@ class Fitter:
     def prediction_variance(self, fit: DiscoveryFit, problem: Problem | None = None) -> np.ndarray:
         """(W, K, C) variance of `predict`'s samples that the fit's parameter uncertainty (its
         Laplace covariance, linearised) carries; the initial speeds of windows the fit did not
-        see keep their prior std `V0_PRIOR_STD` (inflated like the fit's covariance)."""
+        see keep their prior std `V0_STD` (inflated like the fit's covariance)."""
         to, unseen = self._on(problem)
         free, cov = (fit.free, fit.cov) if to is None else (to[fit.free], fit.cov)
         if unseen.size:
             k = len(free)
             grown = np.zeros((k + unseen.size,) * 2)
             grown[:k, :k] = cov
-            grown[k:, k:] = np.eye(unseen.size) * V0_PRIOR_STD**2 * max(1.0, fit.chi2_dof)
+            grown[k:, k:] = np.eye(unseen.size) * V0_STD**2 * max(1.0, fit.chi2_dof)
             free, cov = np.concatenate([free, unseen]), grown
         jac = self._linearised(fit.z, fit.effects, problem, free)[1]
         return np.einsum("...k,kl,...l->...", jac, cov, jac)
@@ -323,7 +321,7 @@ class Fitter:
         jac = np.concatenate([jac_t, jac_v, jac_e], axis=-1) / sigma[:, None]
         # The start speeds' variances from their own information (each moves its own window).
         std = post.noise.std
-        var_v = 1.0 / (np.sum((jac_v / std[:, None]) ** 2, axis=(1, 2)).diagonal() + V0_PRIOR_STD**-2)
+        var_v = 1.0 / (np.sum((jac_v / std[:, None]) ** 2, axis=(1, 2)).diagonal() + V0_STD**-2)
         te = np.r_[np.arange(k_t), k_t + k_v + np.arange(k_e)]
         cov = np.zeros((len(free),) * 2)
         cov[np.ix_(te, te)] = post.cov_z[np.ix_(fitted, fitted)]

@@ -15,3 +15,4 @@ from ._noise import (
     measure_noise as measure_noise,
 )
 from ._screen import screened_sample as screened_sample
+from ._start_speed import V0_STD as V0_STD
