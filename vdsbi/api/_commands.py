@@ -11,9 +11,12 @@ from ..problem import parameter_name
 from ..simulator.models import LongitudinalChoice
 
 
-def shown(path: str | os.PathLike | None, default: str) -> str:
-    """`path` as the user gave it (quoted for a shell), or `default` when there is none."""
-    return default if path is None else shlex.quote(str(path))
+def shown(path: str | os.PathLike | Sequence[str | os.PathLike] | None, default: str) -> str:
+    """`path` (or several) as the user gave it (quoted for a shell), or `default` when there is none."""
+    if path is None:
+        return default
+    paths = [path] if isinstance(path, (str, os.PathLike)) else list(path)
+    return " ".join(shlex.quote(str(p)) for p in paths)
 
 
 def diagnose_command(recording, vehicle, out, longitudinal: LongitudinalChoice = "auto") -> str:

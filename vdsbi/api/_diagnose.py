@@ -45,9 +45,7 @@ def diagnose(
     from ..discovery import diagnose_mismatch, write_report
 
     found = diagnose_mismatch(recording, vehicle, None, **options)
-    rec, veh, out = (
-        n if isinstance(n, (str, os.PathLike)) else None for n in (names or (recording, vehicle, out_dir))
-    )
+    rec, veh, out = (_as_named(n) for n in (names or (recording, vehicle, out_dir)))
     if rec is None:
         rec = found.report["source"]
     chosen = found.report["chosen"]
@@ -71,3 +69,12 @@ def diagnose(
         write_report(found, Path(out_dir), plots=plots)
         (Path(out_dir) / "report.html").write_text(diagnose_page(found.report, out_dir))
     return found
+
+
+def _as_named(given):
+    """A path (or several) as the user named it; None for an in-memory object."""
+    if isinstance(given, (str, os.PathLike)):
+        return given
+    if isinstance(given, (list, tuple)) and given and all(isinstance(g, (str, os.PathLike)) for g in given):
+        return list(given)
+    return None

@@ -20,7 +20,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "the chosen effect(s) and compare the fit before/after on a held-out part of the "
         "recording. Writes report.json, report.md and figures to DIR.",
     )
-    p.add_argument("recording", metavar="REC", help="recording: .csv, .parquet or ROS2 bag")
+    p.add_argument(
+        "recording",
+        metavar="REC",
+        nargs="+",
+        help="recording: .csv, .parquet or ROS2 bag; several drives of one car are diagnosed together",
+    )
     p.add_argument("--vehicle", required=True, metavar="V", help="vehicle constants (.json or .yaml)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory (new or empty)")
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists")
@@ -61,7 +66,9 @@ def run(args) -> int:
     candidates = (
         None if args.effects is None else _args.effect_names(args.effects.split(","), known=effect_names())
     )
-    rec, vehicle = load_drive(args.recording, args.vehicle)
+    drives = [load_drive(r, args.vehicle) for r in args.recording]
+    rec, vehicle = [r for r, _ in drives], drives[0][1]
+    rec = rec if len(rec) > 1 else rec[0]
     with output_dir(args.out, overwrite=args.overwrite) as d:
         res = api.diagnose(
             rec,
@@ -78,7 +85,7 @@ def run(args) -> int:
             final_dt=args.final_dt,
             quiet=args.quiet,
             plots=not args.no_plots,
-            names=(args.recording, args.vehicle, args.out),
+            names=(args.recording if len(args.recording) > 1 else args.recording[0], args.vehicle, args.out),
         )
     rep = res.report
     if not args.quiet:

@@ -308,7 +308,8 @@ def _input_xcorr(res, inputs, names, input_names, rate, max_lag) -> dict:
     """Per channel and input, the window-averaged residual–input cross-correlation's peak,
     its lag and whether it exceeds 4/√(W·L)."""
     W, L, C = res.shape
-    lag_n = max(1, int(round(max_lag * rate)))
+    # a stretch shorter than the longest lag looked at has only its own lags
+    lag_n = max(1, min(int(round(max_lag * rate)), L - 1))
     thr_x = 4.0 / np.sqrt(W * L)
     xc: dict = {}
     for c in range(C):

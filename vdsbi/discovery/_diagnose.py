@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NamedTuple
 
@@ -27,6 +27,7 @@ from ..problem import (
     Box,
     Problem,
     ProblemSettings,
+    concat_problems,
     default_effects,
     longitudinal_mode,
     make_problem,
@@ -117,15 +118,16 @@ class _Decision(NamedTuple):
     final: DiscoveryFit
 
 
-def _cut_windows(recording: Recording, vehicle: Vehicle, s: DiagnoseSettings, say) -> Problem:
-    speed = issubclass(model_class(longitudinal_mode(recording, s.longitudinal)), SpeedDriven)
+def _cut_windows(recordings: Sequence[Recording], vehicle: Vehicle, s: DiagnoseSettings, say) -> Problem:
+    """The windows of every recording, side by side (`concat_problems`)."""
+    speed = issubclass(model_class(longitudinal_mode(recordings[0], s.longitudinal)), SpeedDriven)
     settings = ProblemSettings(
         longitudinal=s.longitudinal,
         max_window=s.max_window or (10.0 if speed else 20.0),
         max_windows=s.max_windows,
         held_out=1.0 - s.train_fraction,
     )
-    problem = make_problem(recording, vehicle, settings)
+    problem = concat_problems([make_problem(r, vehicle, settings) for r in recordings])
     span = problem.t.shape[1] * problem.dt
     say(
         f"{problem.longitudinal}-driven; windows: {problem.num_windows} × {span:.1f} s, "
@@ -335,7 +337,7 @@ def _conclude(before, decision, base, after, held, terms, test_terms, windows: P
 
 
 def diagnose_mismatch(
-    recording: Recording | str | os.PathLike,
+    recording: Recording | str | os.PathLike | Sequence[Recording | str | os.PathLike],
     vehicle: Vehicle | str | os.PathLike,
     out_dir: str | os.PathLike | None = None,
     *,
@@ -351,7 +353,9 @@ def diagnose_mismatch(
     test the fixed model and compare both on the held-out part → report.
 
     Args:
-        recording: a `Recording` or a path readable by `vdsbi.io.read_recording`.
+        recording: a `Recording` or a path readable by `vdsbi.io.read_recording`; or several
+            recordings of one car (or of cars of one platform), diagnosed together: their
+            windows side by side, each drive's last part held out.
         vehicle: a `Vehicle` or a vehicle file path.
         out_dir: if given, write report.json, report.md and plots there (must not exist or be
             empty).
@@ -366,12 +370,12 @@ def diagnose_mismatch(
     s = dataclasses.replace(settings or DiagnoseSettings(), **options)
     say = Progress(s.quiet, log)
     vehicle = vehicle if isinstance(vehicle, Vehicle) else read_vehicle(vehicle)
-    recording = recording if isinstance(recording, Recording) else read_recording(recording)
+    recordings = _recordings(recording)
     names = s.candidate_names()
     with jax.enable_x64(True):
-        windows = _cut_windows(recording, vehicle, s, say)
-        found = _find(windows, vehicle, s, names, measured_steer_lag(recording, vehicle), say)
-    report = build_report(recording, windows, s, found, seconds=say.seconds)
+        windows = _cut_windows(recordings, vehicle, s, say)
+        found = _find(windows, vehicle, s, names, _steer_lag(recordings, vehicle), say)
+    report = build_report(recordings, windows, s, found, seconds=say.seconds)
     result = DiagnosisResult(
         report=report,
         verdict=found.conclusion,
@@ -392,6 +396,21 @@ def diagnose_mismatch(
     if out_dir is not None:
         write_report(result, Path(out_dir), plots=s.plots)
     return result
+
+
+def _recordings(given) -> list[Recording]:
+    """One or several recordings, read where given as paths."""
+    many = isinstance(given, Sequence) and not isinstance(given, str)
+    out = [r if isinstance(r, Recording) else read_recording(r) for r in (given if many else [given])]
+    if not out:
+        raise ValueError("diagnose: no recording given")
+    return out
+
+
+def _steer_lag(recordings: Sequence[Recording], vehicle: Vehicle) -> float | None:
+    """The steer-to-response lag the recordings show: the median of those measured (None: none)."""
+    lags = [lag for r in recordings if (lag := measured_steer_lag(r, vehicle)) is not None]
+    return float(np.median(lags)) if lags else None
 
 
 def _find(

@@ -96,12 +96,12 @@ class Findings(NamedTuple):
 
 
 def build_report(
-    recording: Recording, windows: Problem, s: DiagnoseSettings, f: Findings, seconds: float
+    recordings: Sequence[Recording], windows: Problem, s: DiagnoseSettings, f: Findings, seconds: float
 ) -> dict:
     """report.json's content."""
     chosen = f.conclusion.chosen
     return {
-        "source": str(recording.source),
+        "source": " + ".join(str(r.source) for r in recordings),
         "mismatch_detected": f.conclusion.detected,
         "p_value": float(f.test_before.p_value),
         "alpha": s.alpha,
@@ -134,7 +134,7 @@ def build_report(
         },
         "windows": _window_spans(windows, s.train_fraction),
         "channels": list(windows.channels),
-        "recording_warnings": list(recording.warnings),
+        "recording_warnings": [w for r in recordings for w in r.warnings],
         "method": _method(s, f.coarse, f.fitter),
         "seconds": seconds,
     }
@@ -207,10 +207,20 @@ def _window_spans(windows: Problem, train_fraction: float) -> dict:
             for w in range(windows.num_windows)
         ],
         "held_out_from_s": held_out_from(windows),
+        # which of the diagnosed recordings each window is cut from (0 for one)
+        "recording": [w.recording for w in windows.windows],
         "train_fraction": train_fraction,
         # Where the drive is at the limit the model cannot follow: located, left out, said why.
-        "left_out": [r for r in windows.description.get("rejected", []) if str(r[2]).startswith("limit")],
+        "left_out": [r for r in _rejected(windows) if str(r[2]).startswith("limit")],
     }
+
+
+def _rejected(windows: Problem) -> list:
+    """The stretches the problem left out, over every recording it holds."""
+    rejected = windows.description.get("rejected", [])
+    if "recordings" in windows.description:  # several recordings: one list each
+        return [r for per in rejected for r in (per or [])]
+    return rejected
 
 
 def _method(s: DiagnoseSettings, coarse: Fitter, fitter: Fitter) -> dict:

@@ -61,7 +61,7 @@ def concat_problems(problems: Sequence[Problem]) -> Problem:
     return dataclasses.replace(
         first,
         source=" + ".join(p.source for p in problems),
-        windows=tuple(w for p in problems for w in p.windows),
+        windows=tuple(dataclasses.replace(w, recording=i) for i, p in enumerate(problems) for w in p.windows),
         t=t,
         u=cat("u", n),
         speed=cat("speed", n),

@@ -21,12 +21,15 @@ class Window:
             (held out whole).
         split: for a "train" window that is also the held-out window (a short drive), the time
             from which its samples are held out, s; None otherwise.
+        recording: which recording of a problem made of several it is cut from (0 for one):
+            windows of two drives that span the same times are two windows.
     """
 
     t0: float
     t1: float
     role: Literal["train", "held"]
     split: float | None = None
+    recording: int = 0
 
     @property
     def duration(self) -> float:

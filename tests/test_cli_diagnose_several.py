@@ -1,0 +1,89 @@
+"""`vdsbi diagnose` on several drives of one car at once: both drives' windows are fitted
+together, the bias they share is named, and the identify command it prints takes both drives and
+runs."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import shlex
+from pathlib import Path
+
+import jax
+import numpy as np
+import pandas as pd
+import pytest
+
+from vdsbi.cli import build_parser, main
+from vdsbi.simulator import (
+    CHANNELS,
+    SEED_TRUE_THETA,
+    default_vehicle,
+    random_profile,
+    simulate,
+    theta_from_dict,
+)
+
+NOISE = {"ax": 0.05, "ay": 0.05, "yaw_rate": 0.005, "omega_front": 0.1, "omega_rear": 0.1, "vx": 0.05}
+BIAS = {"ax": 0.3, "ay": -0.25, "yaw_rate": 0.0}
+
+
+def _drive(folder: Path, seed: int) -> Path:
+    """A 4 s drive of the built-in vehicle at the seed's truth, its IMU biased."""
+    inp = random_profile(jax.random.key(seed), 4.0)
+    eff = {"sensor_bias": BIAS}
+    ys, ok = simulate(
+        theta_from_dict(SEED_TRUE_THETA),
+        inp,
+        default_vehicle(),
+        v0=10.0,
+        effects=list(eff),
+        effect_params=eff,
+    )
+    assert ok
+    rng = np.random.default_rng(seed)
+    df = pd.DataFrame({"t": np.asarray(inp.ts), "steer": np.asarray(inp.steer)})
+    df["torque_front"], df["torque_rear"] = np.asarray(inp.torque_front), np.asarray(inp.torque_rear)
+    for i, c in enumerate(CHANNELS):
+        df[c] = np.asarray(ys)[:, i] + rng.normal(0.0, NOISE[c], len(df))
+    path = folder / f"drive{seed}.csv"
+    df.to_csv(path, index=False)
+    return path
+
+
+@pytest.fixture(scope="module")
+def pooled(tmp_path_factory):
+    d = tmp_path_factory.mktemp("several")
+    drives = [_drive(d, 1), _drive(d, 2)]
+    veh = d / "vehicle.json"
+    veh.write_text(json.dumps({**default_vehicle().to_dict(), "noise_std": NOISE}))
+    out = d / "diag"
+    args = ["diagnose", *map(str, drives), "--vehicle", str(veh), "--out", str(out), "--final-dt", "0.005"]
+    args += ["--effects", "sensor_bias,road_grade", "--max-effects", "1"]
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        assert main(args) == 0
+    return drives, veh, out, printed.getvalue()
+
+
+def test_both_drives_are_fitted_together_and_the_shared_bias_is_named(pooled):
+    drives, _, out, _ = pooled
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["source"] == " + ".join(str(p) for p in drives)
+    assert rep["mismatch_detected"] and rep["chosen"] == ["sensor_bias"]
+    # each drive's last part is held out, so both drives hold fitted and held-out samples
+    assert set(rep["windows"]["recording"]) == {0, 1}
+    assert abs(rep["effect_params"]["sensor_bias"]["ax"] - BIAS["ax"]) < 0.05
+
+
+def test_the_printed_identify_command_takes_both_drives_and_runs(pooled):
+    drives, veh, out, printed = pooled
+    last = printed.strip().splitlines()[-1]
+    argv = shlex.split(last)
+    parsed = build_parser().parse_args(argv[1:])
+    assert parsed.recording == [str(p) for p in drives] and parsed.effects == "+sensor_bias"
+    assert main([*argv[1:], "--quiet"]) == 0
+    post = json.loads((Path(parsed.out) / "posterior.json").read_text())
+    # both drives inform the one bias
+    assert abs(post["parameters"]["sensor_bias.ax"]["estimate"] - BIAS["ax"]) < 0.02
