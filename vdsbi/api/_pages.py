@@ -10,6 +10,7 @@ from typing import Any
 from scipy.stats import binom
 
 from ..diagnostics import ridge_sentence
+from ..problem import parameter_name
 from ..simulator import PARAM_UNITS
 from . import _html as H
 from ._export import identified_status
@@ -250,7 +251,7 @@ def diagnose_page(rep: Mapping[str, Any], folder: str | os.PathLike) -> str:
 
 def _effect_values(e: Mapping[str, Any]) -> str:
     return "; ".join(
-        f"{eff}.{k} = {v:.3g} ± {e['params_std'][eff][k]:.2g}"
+        f"{parameter_name(eff, k)} = {v:.3g} ± {e['params_std'][eff][k]:.2g}"
         for eff, d in e["params"].items()
         for k, v in d.items()
     )

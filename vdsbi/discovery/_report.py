@@ -288,7 +288,7 @@ def _md_candidates(rep: dict) -> list[str]:
     L.append("|---|---|---|---|---|")
     for i, e in enumerate(rep["effects"][:12]):
         ps = "; ".join(
-            f"{eff}.{k} = {v:.4g} ± {e['params_std'][eff][k]:.2g}"
+            f"{parameter_name(eff, k)} = {v:.4g} ± {e['params_std'][eff][k]:.2g}"
             for eff, d in e["params"].items()
             for k, v in d.items()
         )
