@@ -10,52 +10,20 @@ import json
 import shlex
 from pathlib import Path
 
-import jax
-import numpy as np
-import pandas as pd
 import pytest
+from drives import drive_csv
 
 from vdsbi.cli import build_parser, main
-from vdsbi.simulator import (
-    CHANNELS,
-    SEED_TRUE_THETA,
-    default_vehicle,
-    random_profile,
-    simulate,
-    theta_from_dict,
-)
+from vdsbi.simulator import default_vehicle
 
 NOISE = {"ax": 0.05, "ay": 0.05, "yaw_rate": 0.005, "omega_front": 0.1, "omega_rear": 0.1, "vx": 0.05}
 BIAS = {"ax": 0.3, "ay": -0.25, "yaw_rate": 0.0}
 
 
-def _drive(folder: Path, seed: int) -> Path:
-    """A 4 s drive of the built-in vehicle at the seed's truth, its IMU biased."""
-    inp = random_profile(jax.random.key(seed), 4.0)
-    eff = {"sensor_bias": BIAS}
-    ys, ok = simulate(
-        theta_from_dict(SEED_TRUE_THETA),
-        inp,
-        default_vehicle(),
-        v0=10.0,
-        effects=list(eff),
-        effect_params=eff,
-    )
-    assert ok
-    rng = np.random.default_rng(seed)
-    df = pd.DataFrame({"t": np.asarray(inp.ts), "steer": np.asarray(inp.steer)})
-    df["torque_front"], df["torque_rear"] = np.asarray(inp.torque_front), np.asarray(inp.torque_rear)
-    for i, c in enumerate(CHANNELS):
-        df[c] = np.asarray(ys)[:, i] + rng.normal(0.0, NOISE[c], len(df))
-    path = folder / f"drive{seed}.csv"
-    df.to_csv(path, index=False)
-    return path
-
-
 @pytest.fixture(scope="module")
 def pooled(tmp_path_factory):
     d = tmp_path_factory.mktemp("several")
-    drives = [_drive(d, 1), _drive(d, 2)]
+    drives = [drive_csv(d / f"drive{seed}.csv", seed, {"sensor_bias": BIAS}, NOISE) for seed in (1, 2)]
     veh = d / "vehicle.json"
     veh.write_text(json.dumps({**default_vehicle().to_dict(), "noise_std": NOISE}))
     out = d / "diag"

@@ -16,6 +16,7 @@ from vdsbi.fleet import (  # noqa: E402
     Cluster,
     Escalation,
     FleetSettings,
+    MisfitSettings,
     TrueChange,
     fleet,
     simulated_fleet,
@@ -34,6 +35,9 @@ QUICK = FleetSettings(
         draws_per_window=200,
     ),
     escalation=Escalation(rounds=1, sims=100, epochs=2, ppc_draws=10),
+    misfit=MisfitSettings(
+        most_cars=2, options=(("candidates", ("sensor_bias",)), ("max_effects", 1), ("final_dt", 0.005))
+    ),
 )
 
 
@@ -76,7 +80,12 @@ def test_tiny_fleet_survives_a_killed_worker_and_reruns_skip(tmp_path):
     assert len(lines) - 1 == 6 * len(names)
     assert (out / "changes.csv").read_text().startswith("car,parameter,time,before,after")
     assert "<img" in (out / "report.html").read_text()
+    # the platform's two latest-driven cars' last drives, diagnosed together, linked from the report
+    (platform,) = [m for m in first.misfits if m.scope == "platform"]
+    assert len(platform.drives) == 2 and (out / platform.folder / "report.json").exists()
+    assert f"{platform.folder}/report.html" in (out / "report.html").read_text()
 
     again = fleet(manifest, out, QUICK, cluster)
     assert again.answered == 0 and again.skipped == 6
+    assert again.misfits == first.misfits  # read back, not diagnosed again
     assert (out / "estimates.csv").read_text().splitlines() == lines

@@ -18,8 +18,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "(once; reused by later runs into DIR), answer each drive with it, check each answer against the "
         "likelihood by Pareto-smoothed importance sampling, escalate a failing drive to a likelihood fit "
         "and then to the full identify, and follow each car's parameters over time. Writes "
-        "DIR/estimates.csv as drives finish, then changes.csv and report.html. A re-run skips the drives "
-        "already answered; a killed worker's drive is retried.",
+        "DIR/estimates.csv as drives finish, then changes.csv, the diagnosis of each platform's pooled "
+        "drives (misfit.json) and report.html. A re-run skips the drives already answered; a killed "
+        "worker's drive is retried.",
     )
     p.add_argument("manifest", metavar="MANIFEST", help="CSV with columns car, recording, vehicle, time")
     p.add_argument(
@@ -43,13 +44,18 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "--identify-sims", type=int, default=1000, help="identify's simulations per round (default 1000)"
     )
     p.add_argument("--retrain", action="store_true", help="train the platforms' estimators again")
+    p.add_argument(
+        "--no-diagnose",
+        action="store_true",
+        help="skip diagnosing the pooled drives of each platform (and of a car whose misfit stands out)",
+    )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
 
 def _settings(args):
-    from ..fleet import AmortizedSettings, Escalation, FleetSettings
+    from ..fleet import AmortizedSettings, Escalation, FleetSettings, MisfitSettings
 
     amortized = AmortizedSettings()
     try:
@@ -61,7 +67,12 @@ def _settings(args):
         escalation = Escalation(rounds=args.identify_rounds, sims=args.identify_sims)
     except ValueError as err:
         raise InputError("settings", "--sims/--epochs", str(err)) from None
-    return FleetSettings(amortized=amortized, escalation=escalation, seed=args.seed)
+    return FleetSettings(
+        amortized=amortized,
+        escalation=escalation,
+        misfit=None if args.no_diagnose else MisfitSettings(),
+        seed=args.seed,
+    )
 
 
 def run(args) -> int:
@@ -89,5 +100,11 @@ def run(args) -> int:
         f"{methods}; "
         f"{len(result.changes)} changes; {result.seconds:.0f} s"
     )
-    print(f"wrote {result.out / 'estimates.csv'}, changes.csv, report.html")
+    for m in result.misfits:
+        scope = f"platform {m.platform}" if m.car is None else f"car {m.car}"
+        found = ", ".join(m.named) or "nothing named"
+        print(f"{scope}: misfit {'detected' if m.detected else 'not detected'}; {found}")
+        if m.identify_command:
+            print(f"  {m.identify_command}")
+    print(f"wrote {result.out / 'estimates.csv'}, changes.csv, misfit.json, report.html")
     return 0

@@ -17,6 +17,7 @@ from ._changes import ChangeSettings
 from ._drive import Escalation, answer_drive
 from ._engine import Cluster, open_client
 from ._manifest import Drive, read_manifest
+from ._misfit import Misfit, MisfitSettings, shared_misfit
 from ._prepare import prepare_platform
 from ._report import write_report
 from ._tables import append_estimates, fleet_changes, read_results, write_changes, write_estimates
@@ -30,12 +31,14 @@ class FleetSettings:
         amortized: the platforms' estimators.
         escalation: `identify`'s settings for drives whose check fails.
         changes: the sequential test per car and parameter.
+        misfit: which pooled drives `diagnose` runs on (None: no diagnosis).
         seed: the only source of randomness.
     """
 
     amortized: AmortizedSettings = AmortizedSettings()
     escalation: Escalation = Escalation()
     changes: ChangeSettings = ChangeSettings()
+    misfit: MisfitSettings | None = MisfitSettings()
     seed: int = 0
 
     @property
@@ -52,6 +55,7 @@ class FleetResult:
         out: the output folder.
         records: every drive's result (this run's and earlier runs' with the same settings).
         changes: the detected changes.
+        misfits: the platforms' and the cars' diagnoses.
         answered: drives answered in this run.
         skipped: drives already answered by an earlier run.
         seconds: wall time of this run.
@@ -60,6 +64,7 @@ class FleetResult:
     out: Path
     records: list
     changes: list
+    misfits: list[Misfit]
     answered: int
     skipped: int
     seconds: float
@@ -83,9 +88,10 @@ def fleet(
     """Answer every drive of `manifest` into `out_dir` (see the `vdsbi fleet` command).
 
     Writes out_dir/estimates.csv (rows appended as drives finish, rebuilt in order at the end),
-    changes.csv, report.html, drives/<drive>/result.json (and identify/ where a drive escalated)
-    and platforms/<vehicle>/ (the platform's record and its estimator). A re-run with the same
-    settings skips the drives already answered; `retrain` trains the estimators again.
+    changes.csv, misfit.json and misfit/ (the pooled drives' diagnoses), report.html,
+    drives/<drive>/result.json (and identify/ where a drive escalated) and platforms/<vehicle>/
+    (the platform's record and its estimator). A re-run with the same settings skips the drives
+    already answered; `retrain` trains the estimators again.
 
     Raises:
         InputError: a bad manifest (naming its line), or `out_dir` not a folder.
@@ -117,9 +123,10 @@ def fleet(
     write_estimates(estimates, records)
     changes = fleet_changes(records, settings.changes)
     write_changes(out / "changes.csv", changes)
+    misfits = [] if settings.misfit is None else shared_misfit(drives, records, out, settings.misfit, say)
     seconds = time.perf_counter() - start
-    write_report(out / "report.html", records, changes, seconds)
-    return FleetResult(out, records, changes, answered, len(drives) - len(todo), seconds)
+    write_report(out / "report.html", records, changes, seconds, misfits)
+    return FleetResult(out, records, changes, misfits, answered, len(drives) - len(todo), seconds)
 
 
 def _run(todo, drives, out, settings, cluster, retrain, estimates, say) -> int:

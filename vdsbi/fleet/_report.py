@@ -55,7 +55,9 @@ def _car_figure(drives: list[dict], changes: list, names: list[str]) -> str:
     return _png(fig)
 
 
-def write_report(path: Path, records: list[dict], changes: list, seconds: float | None = None) -> None:
+def write_report(
+    path: Path, records: list[dict], changes: list, seconds: float | None = None, misfits: list = ()
+) -> None:
     """Write the fleet's report.html."""
     answered = [r for r in records if r.get("parameters")]
     failed = [r for r in records if r.get("method") == "failed"]
@@ -70,6 +72,7 @@ def write_report(path: Path, records: list[dict], changes: list, seconds: float 
         " that drive; red dashed: a change detected (CUSUM over the drives' posteriors).</p>",
     ]
     parts += _platforms(answered)
+    parts += _misfits(misfits)
     if failed:
         parts.append("<h2>Failed drives</h2><table><tr><th>car</th><th>recording</th><th>error</th></tr>")
         parts += [
@@ -128,5 +131,27 @@ def _platforms(records: list[dict]) -> list[str]:
         misfit = ", ".join(f"{c} {np.median(v):.2f}" for c, v in ratios.items())
         text = ", ".join(f"{m} {n}" for m, n in methods.items())
         out.append(f"<tr><td>{html.escape(plat)}</td><td>{len(rs)}</td><td>{text}</td><td>{misfit}</td></tr>")
+    out.append("</table>")
+    return out
+
+
+def _misfits(misfits) -> list[str]:
+    """What each pooled diagnosis found, linked to its own report."""
+    if not misfits:
+        return []
+    out = [
+        "<h2>Misfit</h2><p>`vdsbi diagnose` on pooled drives: each platform's (the latest drive of "
+        "its cars) and each car's whose model error stands out from its platform's.</p>",
+        "<table><tr><th>scope</th><th>drives</th><th>detected</th><th>named</th><th>claimed</th>"
+        "<th>verdict</th></tr>",
+    ]
+    for m in misfits:
+        scope = f"platform {m.platform}" if m.car is None else f"car {m.car}"
+        link = f"<a href='{html.escape(m.folder)}/report.html'>{html.escape(scope)}</a>"
+        out.append(
+            f"<tr><td>{link}</td><td>{len(m.drives)}</td><td>{'yes' if m.detected else 'no'}</td>"
+            f"<td>{html.escape(', '.join(m.named) or '–')}</td><td>{'yes' if m.claimed else 'no'}</td>"
+            f"<td>{html.escape(m.verdict)}</td></tr>"
+        )
     out.append("</table>")
     return out

@@ -1,0 +1,191 @@
+"""What a platform's model misses, and what a car misses alone: `diagnose` on pooled drives.
+
+Each answered drive carries its model error: per channel, the residual's RMS at its answer over
+the sensor noise (`noise_ratio`). The platform's diagnosis pools the latest drive of each of its
+cars (at most `MisfitSettings.most_cars`): whether the drives share a misfit is the diagnosis'
+own misspecification test, and what it names (and claims, where the named effect also predicts
+the pooled drives' held-out parts better) is the platform's. A car whose model error stands out
+from its platform's on some channel (its median log ratio over its drives more than
+`MisfitSettings.alone` robust standard deviations above the cars' median: a lagging actuator, a
+bent sensor mount) is diagnosed alone on its latest drives and left out of the platform's pool.
+
+A diagnosis is kept in `misfit/<scope>/` beside a record of the drives it pooled; a re-run with
+the same drives and settings reads it back instead of diagnosing again.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from ..io import write_text_atomically
+from ._manifest import Drive, safe_name
+
+#: Median absolute deviation to the standard deviation of a normal sample.
+MAD_TO_STD = 1.4826
+
+
+@dataclasses.dataclass(frozen=True)
+class MisfitSettings:
+    """Which drives are diagnosed, and how.
+
+    Attributes:
+        alone: a car misses alone when its median log model-error ratio on a channel exceeds the
+            platform's median car by this many robust standard deviations of the cars' (and by a
+            factor 1.5 at least, so that cars that all fit alike flag none).
+        min_cars: fewest cars of a platform for a car to be told from the others.
+        most_cars: most cars whose latest drive the platform's diagnosis pools.
+        drives_per_car: a car missing alone is diagnosed on its latest this many drives.
+        options: `vdsbi.api.diagnose` options (e.g. a smaller search), as (name, value) pairs.
+    """
+
+    alone: float = 3.0
+    min_cars: int = 3
+    most_cars: int = 4
+    drives_per_car: int = 2
+    options: tuple[tuple[str, object], ...] = ()
+
+
+@dataclasses.dataclass(frozen=True)
+class Misfit:
+    """One diagnosis of pooled drives.
+
+    Attributes:
+        scope: "platform" or "car".
+        platform: the platform (its vehicle file's stem).
+        car: the car diagnosed alone (None for the platform).
+        drives: the pooled drives' keys.
+        detected: the pooled drives' residual is more than the sensor noise can explain.
+        named: the effects the diagnosis chose.
+        claimed: the named effects also predict the held-out parts better (the identify
+            command is then printed).
+        verdict: the diagnosis' own sentence.
+        identify_command: how to identify the pooled drives with what was named (None unless
+            claimed).
+        folder: the diagnosis' folder, relative to the fleet's output.
+    """
+
+    scope: str
+    platform: str
+    car: str | None
+    drives: tuple[str, ...]
+    detected: bool
+    named: tuple[str, ...]
+    claimed: bool
+    verdict: str
+    identify_command: str | None
+    folder: str
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def cars_missing_alone(records: list[dict], settings: MisfitSettings) -> dict[str, list[str]]:
+    """{car: channels on which its model error stands out from its platform's} (module docstring)."""
+    by_car: dict[str, dict[str, list[float]]] = {}
+    for r in records:
+        for channel, ratio in (r.get("noise_ratio") or {}).items():
+            if ratio and ratio > 0:
+                by_car.setdefault(r["car"], {}).setdefault(channel, []).append(np.log(ratio))
+    if len(by_car) < settings.min_cars:
+        return {}
+    out: dict[str, list[str]] = {}
+    channels = sorted({c for per in by_car.values() for c in per})
+    for channel in channels:
+        med = {car: float(np.median(v[channel])) for car, v in by_car.items() if channel in v}
+        if len(med) < settings.min_cars:
+            continue
+        values = np.array(list(med.values()))
+        centre = float(np.median(values))
+        spread = MAD_TO_STD * float(np.median(np.abs(values - centre)))
+        for car, m in med.items():
+            # judged against the other cars: one car's own excess does not widen its yardstick
+            others = np.array([v for c, v in med.items() if c != car])
+            ref = float(np.median(others))
+            scale = max(spread, MAD_TO_STD * float(np.median(np.abs(others - ref))), 1e-9)
+            if m - ref > max(settings.alone * scale, np.log(1.5)):
+                out.setdefault(car, []).append(channel)
+    return out
+
+
+def shared_misfit(
+    drives: list[Drive],
+    records: list[dict],
+    out: Path,
+    settings: MisfitSettings = MisfitSettings(),
+    say: Callable[[str], None] = lambda s: None,
+) -> list[Misfit]:
+    """Diagnose each platform's pooled drives and each car that misses alone (module docstring);
+    write misfit.json. Drives not answered are left out."""
+    answered = {r["key"]: r for r in records if r.get("method") not in (None, "failed")}
+    by_platform: dict[Path, list[Drive]] = {}
+    for d in drives:
+        if d.key in answered:
+            by_platform.setdefault(d.vehicle, []).append(d)
+    found = []
+    for vehicle, group in by_platform.items():
+        alone = cars_missing_alone([answered[d.key] for d in group], settings)
+        latest = _latest(group)
+        pooled = [ds[-1] for car, ds in latest.items() if car not in alone][-settings.most_cars :]
+        if pooled:
+            found.append(_diagnosis("platform", vehicle, None, pooled, out, settings, say))
+        for car, channels in alone.items():
+            say(f"{car}: model error beyond its platform's on {', '.join(channels)}")
+            own = latest[car][-settings.drives_per_car :]
+            found.append(_diagnosis("car", vehicle, car, own, out, settings, say))
+    write_text_atomically(out / "misfit.json", json.dumps([m.to_dict() for m in found], indent=1) + "\n")
+    return found
+
+
+def _latest(group: list[Drive]) -> dict[str, list[Drive]]:
+    """Each car's drives, oldest first."""
+    out: dict[str, list[Drive]] = {}
+    for d in sorted(group, key=lambda d: d.order):
+        out.setdefault(d.car, []).append(d)
+    return out
+
+
+def _diagnosis(scope, vehicle: Path, car, pooled: list[Drive], out: Path, settings, say) -> Misfit:
+    """`api.diagnose` on `pooled` into misfit/<scope>/, or the kept one for the same drives."""
+    from .. import api
+
+    name = f"platform-{safe_name(vehicle.stem)}" if car is None else f"car-{safe_name(car)}"
+    folder = out / "misfit" / name
+    keys = tuple(d.key for d in pooled)
+    ident = {"drives": list(keys), "options": repr(settings.options)}
+    kept = folder / "pooled.json"
+    if kept.exists() and json.loads(kept.read_text()).get("ident") == ident:
+        m = json.loads(kept.read_text())["misfit"]
+        return Misfit(**m | {"drives": tuple(m["drives"]), "named": tuple(m["named"])})
+    say(f"diagnosing {name} on {len(pooled)} pooled drive(s)")
+    report = folder / "diagnose"
+    # an interrupted diagnosis left a partial folder: diagnose writes into an empty one
+    shutil.rmtree(report, ignore_errors=True)
+    folder.mkdir(parents=True, exist_ok=True)
+    found = api.diagnose(
+        [d.recording for d in pooled],
+        vehicle,
+        report,
+        quiet=True,
+        **dict(settings.options),
+    )
+    rep = found.report
+    misfit = Misfit(
+        scope=scope,
+        platform=vehicle.stem,
+        car=car,
+        drives=keys,
+        detected=bool(rep["mismatch_detected"]),
+        named=tuple(rep["chosen"]),
+        claimed=rep.get("identify_command") is not None,
+        verdict=str(rep["verdict"]),
+        identify_command=rep.get("identify_command"),
+        folder=str(report.relative_to(out)),
+    )
+    write_text_atomically(kept, json.dumps({"ident": ident, "misfit": misfit.to_dict()}, indent=1) + "\n")
+    return misfit
