@@ -14,7 +14,7 @@ import pandas as pd
 from ..io import InputError, read_recording
 from ..problem import ProblemSettings, make_problem, parameter_name
 from ..problem.validation import band_coverage, channel_scores, predict as predict_problem, predictive_band
-from ..simulator import Vehicle
+from ..simulator import PARAM_NAMES, Vehicle
 from ..simulator.effects import get_effect
 from ._export import load_run
 from ._extrapolation import extrapolation
@@ -75,7 +75,7 @@ def predict(
     prob = make_problem(rec, vehicle, settings)
     values = np.array([post["parameters"][n]["estimate"] for n in names])
     effect_values = _effect_values(values, names, effects)
-    pred, ok = predict_problem(prob, values[:6], effects, effect_values)
+    pred, ok = predict_problem(prob, values[: len(PARAM_NAMES)], effects, effect_values)
     if not ok:
         raise InputError(rec.source, "inputs", "the model leaves its domain at the estimate")
     mask = prob.valid

@@ -31,7 +31,7 @@ import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 from scipy.stats import norm
 
-from ..problem import Box, Part, Problem, parameter_names, simulate_draws, windowed_model
+from ..problem import Box, Part, Problem, parameter_names, simulate_draws, split_parameters, windowed_model
 from ..simulator import PARAM_NAMES
 from ..simulator.models import AbstractVehicleModel
 from ..simulator.solvers import Solver
@@ -198,10 +198,11 @@ def fit_likelihood(
     # window goes unnoticed.
     with jax.enable_x64(True):
         wm = windowed_model(problem, effects, solver, model=model)
-        sizes = tuple(len(e.param_names) for e in wm.model.effects)
-        if len(box.names) != len(PARAM_NAMES) + sum(sizes):
-            raise ValueError(f"box over {len(box.names)} parameters, the model has {sum(sizes)} beside θ")
-        return _fit(problem, wm, sizes, start, box, free, part, noise, max_steps, width)
+        effects = tuple(type(e) for e in wm.model.effects)
+        size = sum(len(e.param_names) for e in effects)
+        if len(box.names) != len(PARAM_NAMES) + size:
+            raise ValueError(f"box over {len(box.names)} parameters, the model has {size} beside θ")
+        return _fit(problem, wm, effects, start, box, free, part, noise, max_steps, width)
 
 
 def _first_noise(data: Problem, mask, noise: SensorNoise | ModelError) -> tuple[np.ndarray, np.ndarray, int]:
@@ -217,7 +218,7 @@ def _first_noise(data: Problem, mask, noise: SensorNoise | ModelError) -> tuple[
     return np.asarray(first.scale, float), np.asarray(first.tau, float), noise.passes
 
 
-def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, width):
+def _fit(data: Problem, wm, effects, start, box, free, part, noise, max_steps, width):
     names = box.names
     # Every window, the others masked: the validation fit and the refit on all the driving then
     # share one problem shape, and so one compilation.
@@ -226,10 +227,10 @@ def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, wid
     sensor = np.asarray(data.sigma, float)
     scale, tau, passes = _first_noise(data, mask, noise)
     starts = np.atleast_2d(np.asarray(start, float))
-    start = _best_start(wm, data, mask, starts, sizes, scale)
+    start = _best_start(wm, data, mask, starts, effects, scale)
     z0 = np.asarray(box64.to_unbounded(start, edge=1e-4))
     if free is None:
-        free = _informed(wm, data, box64, z0, sizes, batch=len(starts))
+        free = _informed(wm, data, box64, z0, effects, batch=len(starts))
     free = tuple(n for n in names if n in free)
     idx = np.asarray([names.index(n) for n in free], dtype=int)
     k = len(idx)
@@ -240,7 +241,7 @@ def _fit(data: Problem, wm, sizes, start, box, free, part, noise, max_steps, wid
     mean = prior_mean(box, wm.model.effects)
     p_mean = np.concatenate([mean[idx], np.zeros(kw - k + n_v)])
     coords = _Coordinates(
-        box64, jnp.asarray(z0), jnp.asarray(start, jnp.float64), jnp.asarray(padded), tuple(sizes)
+        box64, jnp.asarray(z0), jnp.asarray(start, jnp.float64), jnp.asarray(padded), effects
     )
     fit = _fitter(wm, data, mask, coords, p_mean, max_steps)
     p, steps = jnp.asarray(np.concatenate([z0[idx], np.zeros(kw - k + n_v)])), []
@@ -359,26 +360,17 @@ def prior_mean(box: Box, effects: Sequence) -> np.ndarray:
     return np.asarray(box.to_unbounded(low + u * width), float)
 
 
-def split_values(values, sizes: Sequence[int]) -> tuple:
-    """(…, 6 + Σ sizes) -> (θ (…, 6), one (…, size) array per effect of the model)."""
-    out, i = [], len(PARAM_NAMES)
-    for n in sizes:
-        out.append(values[..., i : i + n])
-        i += n
-    return values[..., : len(PARAM_NAMES)], tuple(out)
-
-
 #: Step, in logit coordinates, of the test for which parameters the channels depend on.
 INFORMED_STEP = 0.1
 
 
-def _informed(wm, data: Problem, box: Box, z0: np.ndarray, sizes, batch: int) -> tuple[str, ...]:
+def _informed(wm, data: Problem, box: Box, z0: np.ndarray, effects, batch: int) -> tuple[str, ...]:
     """Parameters the compared channels depend on at z0 (C_κ without torques: none): those whose
     logit step of `INFORMED_STEP` changes a valid sample. One batch of `batch` (or more) draws, so
     that the program `_best_start` compiled for its candidates serves it."""
     steps = z0 + INFORMED_STEP * np.eye(len(z0))
     draws = np.concatenate([z0[None], steps, np.repeat(z0[None], max(0, batch - len(z0) - 1), 0)])
-    theta, effect_params = split_values(jax.vmap(box.from_unbounded)(jnp.asarray(draws)), sizes)
+    theta, effect_params = split_parameters(jax.vmap(box.from_unbounded)(jnp.asarray(draws)), effects)
     pred, ok = simulate_draws(None, wm, theta, effect_params=effect_params)
     pred, ok = np.asarray(pred)[: len(z0) + 1], np.asarray(ok)[: len(z0) + 1]
     valid = np.asarray(data.valid)[..., None]
@@ -389,11 +381,11 @@ def _informed(wm, data: Problem, box: Box, z0: np.ndarray, sizes, batch: int) ->
     return tuple(n for n, m in zip(box.names, moved) if m)
 
 
-def _best_start(wm, data: Problem, mask, starts: np.ndarray, sizes, scale: np.ndarray) -> np.ndarray:
+def _best_start(wm, data: Problem, mask, starts: np.ndarray, effects, scale: np.ndarray) -> np.ndarray:
     """The candidate with the least scaled squared misfit (a failed simulation is infinitely bad)."""
     if len(starts) == 1:
         return starts[0]
-    theta, effect_params = split_values(jnp.asarray(starts), sizes)
+    theta, effect_params = split_parameters(jnp.asarray(starts), effects)
     pred, ok = simulate_draws(None, wm, theta, effect_params=effect_params)
     err = np.where(mask[..., None], (np.asarray(pred) - data.y) / scale, 0.0)
     cost = np.where(np.asarray(ok), np.sum(err**2, axis=(1, 2, 3)), np.inf)
@@ -403,20 +395,20 @@ def _best_start(wm, data: Problem, mask, starts: np.ndarray, sizes, scale: np.nd
 class _Coordinates(eqx.Module):
     """Where a fit moves: the free logit coordinates `idx` (padded past the end to a common
     width) of the box's parameters, the others held exactly at `start`; `z0` the start in logit
-    coordinates, `sizes` the model's effects' parameter counts."""
+    coordinates, `effects` the model's effect classes."""
 
     box: Box
     z0: Float[Array, " P"]
     start: Float[Array, " P"]
     idx: Array
-    sizes: tuple[int, ...] = eqx.field(static=True)
+    effects: tuple[type, ...] = eqx.field(static=True)
 
     def values(self, p):
         """(θ, effect parameters) at p's free coordinates."""
         k = self.idx.shape[0]
         z = self.z0.at[self.idx].set(p[:k], mode="drop")
         is_free = jnp.zeros(self.z0.shape[0], bool).at[self.idx].set(True, mode="drop")
-        return split_values(jnp.where(is_free, self.box.from_unbounded(z), self.start), self.sizes)
+        return split_parameters(jnp.where(is_free, self.box.from_unbounded(z), self.start), self.effects)
 
 
 def _residual(wm, y, mask, coords: _Coordinates, p, std):

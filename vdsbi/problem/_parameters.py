@@ -72,12 +72,13 @@ def prior_box(
     return box
 
 
-def split_parameters(theta_ext, effects: Sequence[str] = ()) -> tuple:
-    """(…, 6 + P) -> (θ (…, 6), one (…, P_e) array per effect)."""
+def split_parameters(theta_ext, effects: Sequence = ()) -> tuple:
+    """(…, 6 + P) -> (θ (…, 6), one (…, P_e) array per effect: a registered name, an effect class
+    or an instance, in the flat vector's order)."""
     theta_ext = jnp.asarray(theta_ext)
     out, i = [], len(PARAM_NAMES)
     for e in effects:
-        n = len(get_effect(e).param_names)
+        n = len(_effect(e).param_names)
         out.append(theta_ext[..., i : i + n])
         i += n
     return theta_ext[..., : len(PARAM_NAMES)], tuple(out)
