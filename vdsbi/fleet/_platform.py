@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import load_drive, read_vehicle
+from ..io import InputError, load_drive, read_vehicle
 from ..problem import (
     Box,
     Problem,
@@ -33,10 +33,20 @@ WINDOW_SECONDS = 15.0
 
 
 def drive_problem(recording: Path, vehicle: Path) -> Problem:
-    """A fleet drive as `identify` reads it, all of it fitted (nothing held out: the fleet checks
-    its answer against the likelihood, not on a held-out part)."""
+    """A fleet drive as `identify` reads it following the measured speed, all of it fitted
+    (nothing held out: the fleet checks its answer against the likelihood, not on a held-out
+    part). The platform's estimator follows the speed, so a drive that logs wheel torques is
+    answered that way too where it measures its speed (its C_κ, which only the torques inform, is
+    then not identified); one without a measured speed is read torque-driven, and `identify`
+    answers it."""
     rec, veh = load_drive(recording, vehicle)
-    return make_problem(rec, veh, ProblemSettings(max_window=MAX_WINDOW, held_out=0.0))
+    settings = ProblemSettings(max_window=MAX_WINDOW, held_out=0.0, longitudinal="speed")
+    try:
+        return make_problem(rec, veh, settings)
+    except InputError:
+        if not rec.has_torques:
+            raise
+        return make_problem(rec, veh, dataclasses.replace(settings, longitudinal="torque"))
 
 
 def platform_effects(problems: Sequence[Problem]) -> tuple[str, ...]:
