@@ -9,13 +9,16 @@ import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..io import InputError, Recording
 from ..simulator import CHANNELS, PARAM_NAMES, SEED_CHANNELS, Vehicle
 from ._validate import PROFILE_V0, NoiseName, checked_theta, load_vehicle, noise_channels, sensor_noise
+
+if TYPE_CHECKING:
+    from ..diagnostics import Limits
 
 
 @dataclasses.dataclass
@@ -83,12 +86,7 @@ def design(
     noise: NoiseName = "seed",
     steps: int = 150,
     learning_rate: float = 0.05,
-    duration: float = 5.0,
-    max_steer: float = 0.1,
-    max_drive: float = 900.0,
-    max_brake: float = 1800.0,
-    brake_front_share: float = 0.65,
-    speed_window: tuple[float, float] = (5.0, 20.0),
+    limits: Limits | None = None,
     log: Callable[[str], None] | None = None,
 ) -> DesignReport:
     """Gradient ascent through the simulator on a maneuver's parameters (steer sines, pedal
@@ -102,7 +100,8 @@ def design(
         theta: parameters (array or {name: value} over the seed's Table II truth).
         noise: "seed" (relative) or "vehicle" (the vehicle's additive noise_std).
         steps, learning_rate: Adam steps and step size.
-        duration, max_steer, max_drive, max_brake, brake_front_share, speed_window: limits.
+        limits: what the test drive may do (`vdsbi.diagnostics.Limits`; default: its defaults, a
+            5 s maneuver in a 5–20 m/s speed window).
         log: where progress lines go, every 10 steps (default: nowhere).
 
     Raises:
@@ -113,7 +112,9 @@ def design(
     veh, source = load_vehicle(vehicle)
     _check_target_and_steps(target, steps)
     th = checked_theta(theta, veh)
-    limits = _limits(duration, max_steer, max_drive, max_brake, brake_front_share, speed_window)
+    from ..diagnostics import Limits
+
+    limits = Limits() if limits is None else limits
     sensor = sensor_noise(noise, veh, source)
     channels, _ = noise_channels(list(SEED_CHANNELS), sensor, source)
     with jax.enable_x64(True):
@@ -181,26 +182,6 @@ def _info(target: str, described, limits, steps: int, res) -> dict[str, Any]:
         "best_step": res.best_step,
         "history": {k: v.tolist() for k, v in res.history.items()},
     }
-
-
-def _limits(duration, max_steer, max_drive, max_brake, brake_front_share, speed_window):
-    from ..diagnostics import Limits
-
-    lo, hi = speed_window
-    try:
-        return Limits(
-            duration=duration,
-            max_steer=max_steer,
-            max_drive=max_drive,
-            max_brake=max_brake,
-            brake_front_share=brake_front_share,
-            v_min=lo,
-            v_max=hi,
-            v0_min=lo,
-            v0_max=hi,
-        )
-    except ValueError as err:
-        raise InputError("arguments", "value", str(err)) from None
 
 
 def _optimise(problem, start, steps: int, learning_rate: float, say: Callable[[str], None]):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from .. import api
-from ..io import output_dir
+from ..io import InputError, output_dir
 from ..simulator import PARAM_NAMES, SEED_TRUE_THETA
 from . import _args
 
@@ -62,12 +62,7 @@ def run(args) -> int:
         noise=args.noise,
         steps=args.steps,
         learning_rate=args.learning_rate,
-        duration=args.duration,
-        max_steer=args.max_steer,
-        max_drive=args.max_drive,
-        max_brake=args.max_brake,
-        brake_front_share=args.brake_front_share,
-        speed_window=tuple(args.speed_window),
+        limits=_limits(args),
         log=lambda s: print(s, flush=True),
     )
     with output_dir(args.out, overwrite=args.overwrite) as d:
@@ -75,3 +70,24 @@ def run(args) -> int:
     print(res.markdown())
     print(f"wrote {args.out}/maneuver.csv, bounds.json, bounds.md, design.json")
     return 0
+
+
+def _limits(args):
+    """The limits the options give: the speed window bounds the speed throughout and at the start."""
+    from ..diagnostics import Limits
+
+    lo, hi = args.speed_window
+    try:
+        return Limits(
+            duration=args.duration,
+            max_steer=args.max_steer,
+            max_drive=args.max_drive,
+            max_brake=args.max_brake,
+            brake_front_share=args.brake_front_share,
+            v_min=lo,
+            v_max=hi,
+            v0_min=lo,
+            v0_max=hi,
+        )
+    except ValueError as err:
+        raise InputError("arguments", "value", str(err)) from None
