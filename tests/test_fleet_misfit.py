@@ -17,7 +17,7 @@ from vdsbi.simulator import default_vehicle
 
 def _records(ratios: dict[str, list[float]], channel="yaw_rate") -> list[dict]:
     return [
-        {"car": car, "key": f"{car}-{i}", "noise_ratio": {channel: r, "ay": 1.2}}
+        {"car": car, "key": f"{car}-{i}", "order": i, "noise_ratio": {channel: r, "ay": 1.2}}
         for car, rs in ratios.items()
         for i, r in enumerate(rs)
     ]
@@ -33,6 +33,9 @@ def test_a_car_whose_model_error_stands_out_is_told_from_its_platform():
     # a platform whose cars all miss alike flags no car: that misfit is the platform's
     shared = {car: [5 * r for r in rs] for car, rs in alike.items()}
     assert cars_missing_alone(_records(shared), settings) == {}
+    # one drive's misfit is that drive's: the car misses alone only on each of its latest drives
+    assert cars_missing_alone(_records(alike | {"d": [1.1, 5.0]}), settings) == {}
+    assert cars_missing_alone(_records(alike | {"d": [5.0, 1.1, 4.5, 5.0]}), settings) == {"d": ["yaw_rate"]}
     # two cars are too few to tell one from the other
     assert cars_missing_alone(_records({"a": [1.0], "d": [5.0]}), settings) == {}
 

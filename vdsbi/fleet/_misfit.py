@@ -5,9 +5,11 @@ the sensor noise (`noise_ratio`). The platform's diagnosis pools the latest driv
 cars (at most `MisfitSettings.most_cars`): whether the drives share a misfit is the diagnosis'
 own misspecification test, and what it names (and claims, where the named effect also predicts
 the pooled drives' held-out parts better) is the platform's. A car whose model error stands out
-from its platform's on some channel (its median log ratio over its drives more than
-`MisfitSettings.alone` robust standard deviations above the cars' median: a lagging actuator, a
-bent sensor mount) is diagnosed alone on its latest drives and left out of the platform's pool.
+from its platform's on some channel on each of its latest drives (the least log ratio over its
+latest `MisfitSettings.drives_per_car` drives more than `MisfitSettings.alone` robust standard
+deviations above the other cars' median: a lagging actuator, a bent sensor mount; one drive's
+misfit alone is that drive's, not the car's) is diagnosed alone on those drives and left out of
+the platform's pool.
 
 A diagnosis is kept in `misfit/<scope>/` beside a record of the drives it pooled; a re-run with
 the same drives and settings reads it back instead of diagnosing again.
@@ -35,12 +37,13 @@ class MisfitSettings:
     """Which drives are diagnosed, and how.
 
     Attributes:
-        alone: a car misses alone when its median log model-error ratio on a channel exceeds the
-            platform's median car by this many robust standard deviations of the cars' (and by a
-            factor 1.5 at least, so that cars that all fit alike flag none).
+        alone: a car misses alone when its least log model-error ratio on a channel over its
+            latest `drives_per_car` drives exceeds the other cars' median by this many robust
+            standard deviations of the cars' (and by a factor 1.5 at least, so that cars that all
+            fit alike flag none).
         min_cars: fewest cars of a platform for a car to be told from the others.
         most_cars: most cars whose latest drive the platform's diagnosis pools.
-        drives_per_car: a car missing alone is diagnosed on its latest this many drives.
+        drives_per_car: a car is judged, and diagnosed alone, on its latest this many drives.
         options: `vdsbi.api.diagnose` options (e.g. a smaller search), as (name, value) pairs.
     """
 
@@ -87,17 +90,21 @@ class Misfit:
 
 def cars_missing_alone(records: list[dict], settings: MisfitSettings) -> dict[str, list[str]]:
     """{car: channels on which its model error stands out from its platform's} (module docstring)."""
+    latest: dict[str, list[dict]] = {}
+    for r in sorted(records, key=lambda r: r.get("order", 0.0)):
+        latest.setdefault(r["car"], []).append(r)
     by_car: dict[str, dict[str, list[float]]] = {}
-    for r in records:
-        for channel, ratio in (r.get("noise_ratio") or {}).items():
-            if ratio and ratio > 0:
-                by_car.setdefault(r["car"], {}).setdefault(channel, []).append(np.log(ratio))
+    for car, rs in latest.items():
+        for r in rs[-settings.drives_per_car :]:
+            for channel, ratio in (r.get("noise_ratio") or {}).items():
+                if ratio and ratio > 0:
+                    by_car.setdefault(car, {}).setdefault(channel, []).append(np.log(ratio))
     if len(by_car) < settings.min_cars:
         return {}
     out: dict[str, list[str]] = {}
     channels = sorted({c for per in by_car.values() for c in per})
     for channel in channels:
-        med = {car: float(np.median(v[channel])) for car, v in by_car.items() if channel in v}
+        med = {car: float(np.min(v[channel])) for car, v in by_car.items() if channel in v}
         if len(med) < settings.min_cars:
             continue
         values = np.array(list(med.values()))
