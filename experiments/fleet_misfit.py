@@ -58,6 +58,9 @@ def bend_imu(manifest: Path, car: str, bias: float) -> list[str]:
 
 def summary(result, biased_car: str, bias: float, seconds: float) -> dict:
     found = {("platform" if m.car is None else m.car): m.to_dict() for m in result.misfits}
+    for m in found.values():  # the values the diagnosis fitted for what it named
+        report = json.loads((result.out / m["folder"] / "report.json").read_text())
+        m["fitted"] = {e: report.get("effect_params", {}).get(e) for e in m["named"]}
     car = found.get(biased_car)
     others = [k for k in found if k not in ("platform", biased_car)]
     return {
@@ -73,6 +76,8 @@ def summary(result, biased_car: str, bias: float, seconds: float) -> dict:
         "methods": result.methods(),
         "misfits": found,
         "seconds": round(seconds, 1),
+        "answered_in_this_run": result.answered,
+        "reused": result.skipped,
     }
 
 
@@ -90,11 +95,13 @@ def markdown(s: dict, args) -> str:
         f"{'detected' if s['platform_detected'] else 'not detected'}; named {', '.join(s['platform_named']) or 'nothing'} |",
         f"| clean cars flagged alone (false alarms) | {len(s['clean_cars_flagged'])} |",
         f"| drives per level | {s['methods']} |",
-        f"| wall time of the run | {s['seconds']} s |",
+        f"| wall time of this run | {s['seconds']} s ({s['answered_in_this_run']} drives answered in it, "
+        f"{s['reused']} and any unchanged diagnosis reused from an earlier run into the same folder) |",
         "",
     ]
     for k, m in s["misfits"].items():
-        lines.append(f"- {k}: {m['verdict']}")
+        fitted = "; ".join(f"{e} {v}" for e, v in m["fitted"].items())
+        lines.append(f"- {k}: {m['verdict']}" + (f" Fitted: {fitted}." if fitted else ""))
     return "\n".join(lines) + "\n"
 
 
