@@ -235,3 +235,12 @@ def test_a_crude_proposal_is_answered_by_the_fit_its_check_starts(tmp_path, monk
     for name in scored:
         q = record["parameters"][name]
         assert abs(q["mean"] - truth[name]) < 4 * q["std"], (name, q, truth[name])
+
+
+def test_a_drive_line_shows_the_k_hat_of_its_last_check():
+    from vdsbi.fleet._fleet import _k_text
+
+    checks = {"amortized": {"k_hat": 40.0}, "fit": {"k_hat": 1.3}, "fit2": {"k_hat": 0.21}}
+    assert _k_text({"checks": checks}) == " (k̂ 0.21)"
+    assert _k_text({"checks": {"amortized": {"k_hat": None}}}) == ""
+    assert _k_text({}) == ""
