@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from vdsbi.cli import main
+from vdsbi.fleet import simulated_fleet
 from vdsbi.fleet._changes import detect_changes
 from vdsbi.fleet._manifest import read_manifest
 from vdsbi.fleet._psis import gpd_fit, psis
@@ -176,3 +177,70 @@ def test_a_local_cluster_left_without_workers_gives_up_its_drives(monkeypatch):
             stuck = client.submit(lambda: 2, pure=False)
             assert list(_fleet._finished(client, {stuck: "b"}, Cluster(), lines.append)) == []
     assert "no workers" in lines[-1] and "1 drives not answered" in lines[-1]
+
+
+def test_the_check_refuses_fewer_draws_than_its_probes_need():
+    import jax
+
+    from vdsbi.fleet._amortized import Proposal
+    from vdsbi.fleet._check import importance_check
+    from vdsbi.problem import Box
+
+    box = Box(np.zeros(3), np.ones(3), ("a", "b", "c"))
+    with pytest.raises(ValueError, match="at least 8"):
+        importance_check(jax.random.key(0), None, box, (), Proposal(np.zeros(3), np.eye(3), 1), draws=7)
+
+
+@pytest.mark.slow
+def test_a_crude_proposal_is_answered_by_the_fit_its_check_starts(tmp_path, monkeypatch):
+    """A drive's chain below `identify` from an amortized posterior far from the truth (1.5 prior
+    std off, in every coordinate): its check fails, the fit starts from the check's best point with
+    its noise, and a fit's Laplace posterior (the first's, or its reweighted refit's) passes the
+    check; the answer's estimates lie within 4 posterior std of the truth."""
+    import json
+
+    import jax
+
+    from vdsbi.estimation import PRIOR_Z_STD
+    from vdsbi.fleet import _drive
+    from vdsbi.fleet._amortized import Proposal
+    from vdsbi.fleet._check import DRAWS, k_threshold
+    from vdsbi.fleet._platform import drive_problem, make_platform
+
+    manifest = simulated_fleet(tmp_path / "fleet", cars=1, drives=1, duration=20.0, changes=(), seed=2)
+    folder = manifest.parent
+    recording, vehicle = folder / "car01" / "drive0.csv", folder / "vehicle.json"
+    truth = json.loads((folder / "truth.json").read_text())["car01/drive0.csv"]["values"]
+    platform = make_platform(vehicle, [drive_problem(recording, vehicle)])
+    box = platform.box
+    centre = np.asarray(box.to_unbounded(np.asarray([truth.get(n, np.nan) for n in box.names])), float)
+    centre = np.where(np.isfinite(centre), centre, 0.0) + 1.5 * PRIOR_Z_STD * np.where(centre > 0, -1, 1)
+    crude = Proposal(centre, np.eye(box.dim) * (0.5 * PRIOR_Z_STD) ** 2, 1)
+    monkeypatch.setattr(_drive, "_estimator", lambda *a: None)
+    monkeypatch.setattr(_drive, "drive_proposal", lambda *a: crude)
+    drive = type("Drive", (), {"recording": recording, "vehicle": vehicle})()
+    stages = {}
+    record = _drive._answer(
+        jax.random.key(0), drive, platform, tmp_path, None, tmp_path / "out", _drive.Escalation(), 10, stages
+    )
+    assert record["method"] == "amortized+fit", record.get("escalated_because")
+    # Each check failed but the last, a fit's: the amortized one, then a fit's, then its refit's.
+    names, ks = list(record["checks"]), [c["k_hat"] for c in record["checks"].values()]
+    assert names[:2] == ["amortized", "fit"] and len(names) <= 1 + _drive.FITS
+    assert ks[-1] <= k_threshold(DRAWS - box.dim - 1)
+    assert ks[0] is None or ks[0] > k_threshold(_drive.AMORTIZED_DRAWS - box.dim - 1)
+    assert all(k is None or k > k_threshold(DRAWS - box.dim - 1) for k in ks[1:-1])
+    scored = [n for n, q in record["parameters"].items() if q["identified"] and n in truth]
+    assert {"l_f", "C_alpha_f", "C_alpha_r"} <= set(scored)
+    for name in scored:
+        q = record["parameters"][name]
+        assert abs(q["mean"] - truth[name]) < 4 * q["std"], (name, q, truth[name])
+
+
+def test_a_drive_line_shows_the_k_hat_of_its_last_check():
+    from vdsbi.fleet._fleet import _k_text
+
+    checks = {"amortized": {"k_hat": 40.0}, "fit": {"k_hat": 1.3}, "fit2": {"k_hat": 0.21}}
+    assert _k_text({"checks": checks}) == " (k̂ 0.21)"
+    assert _k_text({"checks": {"amortized": {"k_hat": None}}}) == ""
+    assert _k_text({}) == ""

@@ -6,13 +6,17 @@ Laplace one of a likelihood fit started from it; heavier tails than the Gaussian
 weights stay bounded where it is too narrow) are simulated on every window of the drive; each is
 weighted by prior × likelihood / proposal. The likelihood is identify's quasi-likelihood
 (`vdsbi.estimation`): per channel, the residual's scale s_c and autocorrelation time τ_c (the
-fit's, or measured at the best draw), Σ r²/(s_c²·τ_c). Parameters the
+fit's, or measured at the best simulated point), Σ r²/(s_c²·τ_c). Parameters the
 channels do not depend on (a step of 0.1 in z moves no fitted sample) are drawn from their prior
 afterwards: the likelihood cannot weigh them.
 
 The check passes at k̂ ≤ min(1 − 1/log10 S, 0.7) for S draws (Vehtari et al. 2024: past it
-the importance-weighted estimates' error no longer falls with S; 0.58 at the ~250 draws here);
+the importance-weighted estimates' error no longer falls with S; 0.58 at 256 draws, 0.52 at 128);
 the drive's answer is then the importance-weighted draws.
+
+The check also returns its best-fitting simulated point (the proposal's mean or a draw, by the
+check's own likelihood) and the noise model of that likelihood: a failed check's simulations then
+start the likelihood fit and weigh its channels, so the fit simulates no candidates of its own.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from ..problem import Box, Problem, simulate_draws, split_parameters, windowed_m
 from ._amortized import Proposal
 from ._psis import psis
 
-#: Proposal draws simulated per drive, beside one probe per parameter and the mean.
+#: Points simulated per check: one probe per parameter, the mean, the proposal's draws.
 DRAWS = 256
 #: The t proposal's degrees of freedom.
 DOF = 5.0
@@ -55,8 +59,11 @@ class CheckResult:
         theta: (S, P) draws in parameter units.
         weights: (S,) their normalised Pareto-smoothed importance weights.
         informed: (P,) whether the channels depend on each parameter.
-        noise_ratio: {channel: residual scale / sensor noise} at the best draw.
+        noise_ratio: {channel: residual scale / sensor noise} at the best simulated point.
         failed_share: share of the draws whose simulation left the model's domain.
+        noise: the noise model of the likelihood.
+        best: (P,) the simulated point (the proposal's mean or a draw, as simulated: before the
+            uninformed parameters are redrawn) of the highest likelihood, in parameter units.
     """
 
     k_hat: float
@@ -66,6 +73,8 @@ class CheckResult:
     informed: np.ndarray
     noise_ratio: dict
     failed_share: float
+    noise: NoiseModel
+    best: np.ndarray
 
     @property
     def passed(self) -> bool:
@@ -95,13 +104,17 @@ def importance_check(
     *,
     spread: float = 1.5,
     noise: NoiseModel | None = None,
+    draws: int = DRAWS,
 ) -> CheckResult:
     """Check `proposal` (a drive's posterior in the box's logit coordinates) on `problem`
-    (module docstring): its draws spread by `spread` over it, the likelihood with `noise` (default:
-    measured at the best draw)."""
+    (module docstring): `draws` points simulated (the probes, the mean and its draws spread by
+    `spread` over it), the likelihood with `noise` (default: measured at the best simulated
+    point)."""
     k_draw, k_prior = jax.random.split(key)
     p = box.dim
-    z, _ = _t_draws(k_draw, proposal, spread, DRAWS - p - 1)
+    if draws < 2 * (p + 1):
+        raise ValueError(f"{draws} draws for {p} parameters: at least {2 * (p + 1)}")
+    z, _ = _t_draws(k_draw, proposal, spread, draws - p - 1)
     probes = proposal.mean[None] + PROBE_STEP * np.concatenate([np.zeros((1, p)), np.eye(p)])
     theta = np.asarray(jax.vmap(box.from_unbounded)(jnp.asarray(np.concatenate([probes, z]))), np.float32)
     wm = windowed_model(problem, effects)
@@ -111,7 +124,9 @@ def importance_check(
     mask = np.asarray(problem.train)
     moved = np.any(np.where(mask[None, ..., None], pred[1 : p + 1] != pred[:1], False), axis=(1, 2, 3))
     informed = moved | ~ok[1 : p + 1] | ~ok[0]
-    pred, ok = pred[p + 1 :], ok[p + 1 :]
+    # The mean and the draws (the probes only find the informed parameters).
+    pred, ok = np.concatenate([pred[:1], pred[p + 1 :]]), np.concatenate([ok[:1], ok[p + 1 :]])
+    simulated = np.concatenate([theta[:1], theta[p + 1 :]]).astype(float)
     resid = np.where(mask[None, ..., None], pred - problem.y[None], 0.0)
     sensor = np.asarray(problem.sigma, float)
     sq = np.sum(resid**2 / sensor**2, axis=(1, 2))  # (S, C) against sensor noise alone
@@ -119,6 +134,8 @@ def importance_check(
     if noise is None:
         noise = measure_noise(resid[best], mask, sensor, problem.channels)
     log_lik = -0.5 * np.sum(sq * sensor**2 / (noise.scale**2 * noise.tau), axis=1)
+    best = int(np.argmin(np.where(ok, -log_lik, np.inf)))
+    log_lik, ok = log_lik[1:], ok[1:]
     # Uninformed parameters: the likelihood is flat in them; their draws come from the prior.
     u = np.asarray(jax.random.uniform(k_prior, z.shape, minval=1e-6, maxval=1 - 1e-6))
     z_prior = np.log(u) - np.log1p(-u)
@@ -130,7 +147,9 @@ def importance_check(
     ess = float(1.0 / np.sum(weights**2) / len(weights))
     theta = np.asarray(jax.vmap(box.from_unbounded)(jnp.asarray(z)), float)
     ratio = {c: round(float(r), 3) for c, r in zip(problem.channels, noise.model_error_ratio)}
-    return CheckResult(float(k_hat), ess, theta, weights, informed, ratio, float(1 - ok.mean()))
+    return CheckResult(
+        float(k_hat), ess, theta, weights, informed, ratio, float(1 - ok.mean()), noise, simulated[best]
+    )
 
 
 def _marginal_logpdf(proposal: Proposal, spread: float, informed: np.ndarray, z: np.ndarray) -> np.ndarray:

@@ -6,11 +6,18 @@ Levels (the `method` of estimates.csv):
 * ``amortized``: the amortized posterior passed the importance check; the answer is its
   importance-weighted draws.
 * ``amortized+fit``: the likelihood fit (`vdsbi.estimation.fit_likelihood`) started from the
-  amortized posterior's mean and draws, and its Laplace posterior passed the importance check; the
-  answer is its importance-weighted draws. The neural training per drive, most of `identify`'s
-  time, is what the amortized estimator saves.
+  best of the amortized check's simulated points (the amortized mean and its draws), and its
+  Laplace posterior passed the importance check; the answer is its importance-weighted draws. The
+  neural training per drive, most of `identify`'s time, is what the amortized estimator saves.
 * ``identify``: `vdsbi.api.identify` on the drive, with the platform's effects; its folder stays
   for `predict` and `export`.
+
+The amortized check's simulations also serve the fit: its best point is the fit's start and the
+noise measured there weighs the fit's channels, so the fit simulates no candidates of its own. A
+fit only places the next check's proposal: that check's likelihood has the noise re-measured at
+the fit, so a fit short of the reweighted optimum is corrected by the importance weights, and k̂
+says when it cannot be. Each fit is therefore one pass, checked; a failed check is followed by a
+reweighting pass from that fit (checked again), up to `FITS` fits, before `identify`.
 """
 
 from __future__ import annotations
@@ -40,8 +47,11 @@ from ._windows import drive_x
 #: Spread of the t proposal over the amortized posterior (crude: wide) and over the fit's Laplace
 #: posterior (its own curvature: near the target).
 AMORTIZED_SPREAD, FIT_SPREAD = 1.5, 1.2
-#: Draws of the amortized posterior tried as the fit's start, beside its mean.
-STARTS = 7
+#: Points the amortized check simulates: one batch of the simulator (`vdsbi.problem.CLEAN_BATCH`);
+#: k̂ ≤ 0.52 passes it. The check of the fit keeps `_check.DRAWS`: its draws are the answer.
+AMORTIZED_DRAWS = 128
+#: Fits tried before `identify`, each from the last with the noise re-measured at it, each checked.
+FITS = 2
 
 
 @dataclasses.dataclass(frozen=True)
@@ -155,7 +165,7 @@ def _timed(stages: dict, name: str, fn, *args, **kwargs):
 def _answer(
     key, drive, platform, est_folder, no_estimator, folder, escalation, draws_per_window, stages
 ) -> dict:
-    k_prop, k_check, k_start, k_fit_check = jax.random.split(key, 4)
+    k_prop, k_check, k_fit_check = jax.random.split(key, 3)
     why = no_estimator
     problem = None
     if why is None:
@@ -173,51 +183,58 @@ def _answer(
     x, has = drive_x(problem)
     proposal = _timed(stages, "amortized", drive_proposal, k_prop, estimator, x, has, draws_per_window)
     check = _timed(
-        stages, "check", importance_check, k_check, problem, box, effects, proposal, spread=AMORTIZED_SPREAD
+        stages,
+        "check",
+        importance_check,
+        k_check,
+        problem,
+        box,
+        effects,
+        proposal,
+        spread=AMORTIZED_SPREAD,
+        draws=AMORTIZED_DRAWS,
     )
     checks = {"amortized": _check_record(check)}
     if check.passed:
         return _checked("amortized", check, box, checks)
-    starts = _starts(k_start, proposal, box)
-    fit = _timed(
-        stages,
-        "fit",
-        fit_likelihood,
-        problem,
-        starts,
-        box,
-        effects=effects,
-        noise=ModelError(passes=1),
-        width=box.dim,
-    )
-    laplace = _laplace(fit, box)
-    check = _timed(
-        stages,
-        "check",
-        importance_check,
-        k_fit_check,
-        problem,
-        box,
-        effects,
-        laplace,
-        spread=FIT_SPREAD,
-        noise=fit.noise,
-    )
-    checks["fit"] = _check_record(check)
-    if check.passed:
-        return _checked("amortized+fit", check, box, checks)
+    start, noise = check.best, check.noise
+    for attempt in range(FITS):
+        fit = _timed(
+            stages,
+            "fit",
+            fit_likelihood,
+            problem,
+            start,
+            box,
+            effects=effects,
+            # Every parameter: the padded width pays for every coordinate's Jacobian column
+            # anyway; one the channels do not depend on has a zero column and keeps the prior,
+            # one the fit's path makes informative is fitted (probes at one point would miss it).
+            free=box.names,
+            noise=ModelError(start=noise, passes=0),
+            width=box.dim,
+        )
+        check = _timed(
+            stages,
+            "check",
+            importance_check,
+            jax.random.fold_in(k_fit_check, attempt),
+            problem,
+            box,
+            effects,
+            _laplace(fit, box),
+            spread=FIT_SPREAD,
+            noise=fit.noise,
+        )
+        checks["fit" if attempt == 0 else f"fit{attempt + 1}"] = _check_record(check)
+        if check.passed:
+            return _checked("amortized+fit", check, box, checks)
+        # The next fit from this one, weighted by the noise measured at it (a reweighting pass).
+        start, noise = fit.theta, fit.noise
     why = (
         f"importance check failed after the fit: k̂ {check.k_hat:.2f} > {k_threshold(len(check.weights)):.2f}"
     )
     return _identify(drive, platform, folder, escalation, why, stages) | {"checks": checks}
-
-
-def _starts(key, proposal: Proposal, box) -> np.ndarray:
-    """The fit's candidate starts in parameter units: the amortized mean and `STARTS` draws."""
-    chol = np.linalg.cholesky(proposal.cov)
-    eps = np.asarray(jax.random.normal(key, (STARTS, len(proposal.mean))))
-    z = np.concatenate([proposal.mean[None], proposal.mean[None] + eps @ chol.T])
-    return np.asarray(jax.vmap(box.from_unbounded)(z), float)
 
 
 def _laplace(fit, box) -> Proposal:
