@@ -34,6 +34,7 @@ from vdsbi.fleet import (
     Cluster,
     Escalation,
     FleetSettings,
+    MisfitSettings,
     fleet,
     simulated_fleet,
 )
@@ -45,13 +46,22 @@ SCORED = ("l_f", "C_alpha_f", "C_alpha_r", "signal_delay.delay")
 
 
 def quick_settings() -> FleetSettings:
-    """A small estimator and a short identify: what the tests run."""
+    """A small estimator, a short identify and a short search in each pooled diagnosis: what the
+    tests run."""
     training = TrainingSettings(
         batch_size=128, learning_rate=1e-3, max_epochs=8, patience=4, cosine_decay=True
     )
     return FleetSettings(
         amortized=AmortizedSettings(simulations=600, training=training, draws_per_window=200),
         escalation=Escalation(rounds=1, sims=100, epochs=2, ppc_draws=10),
+        misfit=MisfitSettings(
+            most_cars=2,
+            options=(
+                ("candidates", ("sensor_bias", "steering_lag")),
+                ("max_effects", 1),
+                ("final_dt", 0.005),
+            ),
+        ),
     )
 
 

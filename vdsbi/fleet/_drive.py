@@ -181,7 +181,10 @@ def _answer(
     box, effects = platform.box, platform.effects
     estimator = _timed(stages, "load", _estimator, est_folder, platform)
     x, has = drive_x(problem)
-    proposal = _timed(stages, "amortized", drive_proposal, k_prop, estimator, x, has, draws_per_window)
+    try:
+        proposal = _timed(stages, "amortized", drive_proposal, k_prop, estimator, x, has, draws_per_window)
+    except np.linalg.LinAlgError as err:  # the estimator's draws have no finite spread
+        return _identify(drive, platform, folder, escalation, f"no amortized answer ({err})", stages)
     check = _timed(
         stages,
         "check",

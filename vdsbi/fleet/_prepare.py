@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import jax
+import numpy as np
 
 from ..io import InputError, read_vehicle, write_text_atomically
 from ..simulator.models import SpeedDriven
@@ -83,6 +84,10 @@ def prepare_platform(
         return platform, None, "no drive of the platform has windows the estimator can take"
     pool = window_pool(shaped, platform.effects)
     estimator = train_estimator(jax.random.fold_in(jax.random.key(seed), 7), pool, platform, settings)
+    loss = estimator.info.get("best_val_loss")
+    if loss is None or not np.isfinite(loss):
+        # A diverged estimator would answer nothing: its drives go to identify, saying why.
+        return platform, None, f"the platform's estimator did not train (validation loss {loss})"
     estimator.info["settings"] = wanted
     estimator.info["pool_drives"] = [str(d.recording) for d in pool_drives(drives, settings.pool_drives)]
     estimator.save(folder)
