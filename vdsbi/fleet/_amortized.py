@@ -114,15 +114,19 @@ def train_estimator(
     box = platform.box
     prior = BoxPrior(np.asarray(box.low), np.asarray(box.high), names=box.names)
     start = time.perf_counter()
-    thetas, xs = [], []
+    thetas, xs, dropped = [], [], 0
     for i in range(-(-settings.simulations // BATCH)):
         k_t, k_i, k_n = jax.random.split(jax.random.fold_in(k_sim, i), 3)
         theta = prior.sample(k_t, BATCH).astype(jnp.float32)
         index = jax.random.randint(k_i, (BATCH,), 0, pool.size)
         x, ok = simulate_batch(pool, jax.random.split(k_n, BATCH), theta, index, settings.noise)
-        ok = np.asarray(ok)
+        x = np.asarray(x)
+        # A window the simulator finished can still give a non-finite statistic (a rare overflow in
+        # float32); one such row would make the estimator's standardisation, and so all of it, NaN.
+        ok = np.asarray(ok) & np.isfinite(x.reshape(len(x), -1)).all(axis=1)
+        dropped += int(np.asarray(ok).size - ok.sum())
         thetas.append(np.asarray(theta)[ok])
-        xs.append(np.asarray(x)[ok])
+        xs.append(x[ok])
     theta, x = np.concatenate(thetas)[: settings.simulations], np.concatenate(xs)[: settings.simulations]
     simulated = time.perf_counter() - start
     say(f"simulated {len(theta)} windows in {simulated:.0f} s; training the platform's estimator")
@@ -131,6 +135,7 @@ def train_estimator(
     seconds = time.perf_counter() - start
     record = {
         "simulations": int(len(theta)),
+        "windows_dropped": dropped,
         "windows_in_pool": pool.size,
         "seconds": round(seconds, 1),
         "simulation_seconds": round(simulated, 1),
