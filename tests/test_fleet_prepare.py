@@ -1,5 +1,8 @@
 """A platform's preparation: an estimator that did not train is no estimator."""
 
+import jax
+import numpy as np
+
 from vdsbi.fleet._manifest import read_manifest
 
 
@@ -20,3 +23,33 @@ def test_a_platform_whose_estimator_diverged_sends_its_drives_to_identify(tmp_pa
     )
     assert platform is not None and folder is None and "did not train" in why
     assert not list(out.glob("platforms/*/estimator.json"))
+
+
+def test_a_simulated_window_with_a_non_finite_statistic_is_left_out_of_training(tmp_path, monkeypatch):
+    """One non-finite row would make the estimator's standardisation NaN: it is dropped, counted,
+    and the estimator trains to a finite loss."""
+    import jax.numpy as jnp
+
+    from vdsbi.fleet import AmortizedSettings, _amortized, simulated_fleet
+    from vdsbi.fleet._platform import WINDOW_SECONDS, drive_problem, make_platform
+    from vdsbi.fleet._shape import fixed_shape
+    from vdsbi.fleet._windows import window_pool
+    from vdsbi.inference import TrainingSettings
+
+    manifest = simulated_fleet(tmp_path / "fleet", cars=1, drives=1, duration=20.0, changes=(), seed=2)
+    (drive,) = read_manifest(manifest)
+    problem = drive_problem(drive.recording, drive.vehicle)
+    platform = make_platform(drive.vehicle, [problem])
+    pool = window_pool([fixed_shape(problem, WINDOW_SECONDS)], platform.effects)
+    real = _amortized.simulate_batch
+
+    def one_overflow(*args):
+        x, ok = real(*args)
+        return x.at[0].set(jnp.inf), ok
+
+    monkeypatch.setattr(_amortized, "simulate_batch", one_overflow)
+    training = TrainingSettings(batch_size=64, max_epochs=3, patience=2)
+    settings = AmortizedSettings(simulations=200, training=training)
+    est = _amortized.train_estimator(jax.random.key(0), pool, platform, settings)
+    assert est.info["windows_dropped"] >= 1
+    assert np.isfinite(est.info["best_val_loss"])
