@@ -56,15 +56,15 @@ def test_a_simulated_window_with_a_non_finite_statistic_is_left_out_of_training(
 
 
 def test_the_window_statistics_solve_matches_lapack_without_calling_it():
-    """The small SPD solve in the window statistics is written out (no batched LAPACK kernel,
+    """The small solve in the window statistics is written out (no batched LAPACK kernel,
     which can hang a single-threaded worker) and agrees with LAPACK to float32 rounding."""
-    from vdsbi.fleet._windows import _spd_solve
+    from vdsbi.fleet._windows import _solve
 
     rng = np.random.default_rng(0)
     a = rng.normal(size=(64, 20)).astype(np.float32)
     g, b = a.T @ a + 1e-3 * np.eye(20, dtype=np.float32), rng.normal(size=20).astype(np.float32)
-    got = np.asarray(jax.jit(_spd_solve)(g, b))
+    got = np.asarray(jax.jit(_solve)(g, b))
     want = np.linalg.solve(g.astype(float), b.astype(float))
     assert np.max(np.abs(got - want)) < 1e-4 * np.max(np.abs(want))
-    hlo = jax.jit(jax.vmap(_spd_solve)).lower(np.stack([g] * 3), np.stack([b] * 3)).as_text()
+    hlo = jax.jit(jax.vmap(_solve)).lower(np.stack([g] * 3), np.stack([b] * 3)).as_text()
     assert "lapack" not in hlo.lower() and "custom_call" not in hlo

@@ -67,24 +67,24 @@ def _shift(a: Float[Array, " K"], j: int) -> Float[Array, " K"]:
     return a if j == 0 else jnp.concatenate([jnp.zeros((j,), a.dtype), a[:-j]])
 
 
-def _spd_solve(g: Float[Array, "n n"], b: Float[Array, " n"]) -> Float[Array, " n"]:
-    """x with g·x = b for a small symmetric positive-definite g: its Cholesky factor written out.
+def _solve(g: Float[Array, "n n"], b: Float[Array, " n"]) -> Float[Array, " n"]:
+    """x with g·x = b for a small g: Gaussian elimination with partial pivoting, written out.
 
     Not `jnp.linalg.solve`: vmapped, that is jaxlib's batched CPU LU, which hands its batch to
     the thread pool it is itself running on and waits, so a worker with one XLA thread (a fleet
-    worker) can hang for ever in it."""
+    worker) can hang for ever in it. Pivoting as LAPACK's getrf does keeps it as robust on a
+    nearly singular g."""
     n = g.shape[0]
-    low = jnp.zeros_like(g)
+    a = jnp.concatenate([g, b[:, None]], axis=1)
+    rows = jnp.arange(n)
     for j in range(n):
-        pivot = jnp.sqrt(jnp.maximum(g[j, j] - low[j, :j] @ low[j, :j], jnp.finfo(g.dtype).tiny))
-        low = low.at[j, j].set(pivot)
-        low = low.at[j + 1 :, j].set((g[j + 1 :, j] - low[j + 1 :, :j] @ low[j, :j]) / pivot)
-    y = jnp.zeros_like(b)
-    for i in range(n):
-        y = y.at[i].set((b[i] - low[i, :i] @ y[:i]) / low[i, i])
+        p = jnp.argmax(jnp.where(rows >= j, jnp.abs(a[:, j]), -1.0))
+        swapped = jnp.where((rows == j)[:, None], a[p], jnp.where((rows == p)[:, None], a[j], a))
+        factor = jnp.where(rows > j, swapped[:, j] / swapped[j, j], 0.0)
+        a = swapped - factor[:, None] * swapped[j][None, :]
     x = jnp.zeros_like(b)
     for i in reversed(range(n)):
-        x = x.at[i].set((y[i] - low[i + 1 :, i] @ x[i + 1 :]) / low[i, i])
+        x = x.at[i].set((a[i, n] - a[i, i + 1 : n] @ x[i + 1 :]) / a[i, i])
     return x
 
 
@@ -103,7 +103,7 @@ def window_x(y: Float[Array, "K C"], u: Float[Array, "K 2"], mask: Bool[Array, "
         a = jnp.stack([_shift(yc, 1), _shift(yc, 2), *excitation], axis=1)
         gram = a.T @ (a * m[:, None])
         ridge = 1e-6 * jnp.trace(gram) / a.shape[1] + 1e-12
-        coef = _spd_solve(gram + ridge * jnp.eye(a.shape[1]), a.T @ (yc * m))
+        coef = _solve(gram + ridge * jnp.eye(a.shape[1]), a.T @ (yc * m))
         resid = (yc - a @ coef) * m
         gains = [jnp.sum(yc * e * m) / (jnp.sum(e * e * m) + 1e-9) for e in (d * v, d * v**2)]
         feats += [coef, jnp.stack([0.5 * jnp.log(jnp.sum(resid**2) / n + 1e-12), *gains])]
