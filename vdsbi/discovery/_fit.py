@@ -190,7 +190,7 @@ class Fitter:
 
     def effect_positions(self, effect: str) -> np.ndarray:
         """Indices in the flattened point of an effect's parameters."""
-        return positions(self.initial_z()).effects[self.effects.slices[effect]]
+        return positions(self._shape(self.num_windows)).effects[self.effects.slices[effect]]
 
     def _on(self, problem: Problem | None):
         """(where the fitted point's entries sit in the flattened point on `problem`'s windows,
@@ -198,10 +198,14 @@ class Fitter:
         if problem is None:
             return None, np.zeros(0, int)
         where = self._windows_on(problem)
-        target = positions(self._z_on(self.initial_z(), problem))
+        target = positions(self._shape(problem.num_windows))
         to = Point(target.theta, target.v0[where], target.effects)
         unseen = np.setdiff1d(target.v0, target.v0[where])
         return np.concatenate(jax.tree.leaves(to)), unseen
+
+    def _shape(self, num_windows: int) -> Point:
+        """A point of zeros over `num_windows` windows: where each entry sits, nothing more."""
+        return Point(np.zeros(len(PARAM_NAMES)), np.zeros(num_windows), np.zeros(self.effects.num_params))
 
     def _windows_on(self, problem: Problem) -> np.ndarray:
         """Where each fitted window sits among `problem`'s windows."""
