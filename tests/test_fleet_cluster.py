@@ -85,7 +85,9 @@ def test_tiny_fleet_survives_a_killed_worker_and_reruns_skip(tmp_path):
     assert len(platform.drives) == 2 and (out / platform.folder / "report.json").exists()
     assert f"{platform.folder}/report.html" in (out / "report.html").read_text()
 
-    again = fleet(manifest, out, QUICK, cluster)
+    said = []
+    again = fleet(manifest, out, QUICK, cluster, log=said.append)
     assert again.answered == 0 and again.skipped == 6
+    assert not any(s.startswith("cluster:") for s in said)  # nothing left to run: no cluster started
     assert again.misfits == first.misfits  # read back, not diagnosed again
     assert (out / "estimates.csv").read_text().splitlines() == lines

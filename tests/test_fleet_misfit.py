@@ -84,3 +84,16 @@ def test_the_platform_diagnosis_pools_its_cars_and_names_the_shared_bias(fleet_f
     said.clear()
     again = shared_misfit(drives, records, tmp_path, QUICK, said.append)
     assert again == found and not any("diagnosing" in s for s in said)
+
+
+def test_a_failed_diagnosis_is_said_and_left_out_for_a_rerun(fleet_folder, tmp_path):
+    drives = read_manifest(fleet_folder / "manifest.csv")
+    records = [{"car": d.car, "key": d.key, "method": "amortized+fit", "noise_ratio": {}} for d in drives]
+    said = []
+
+    def failing(fn, jobs):
+        return [RuntimeError("worker lost") for _ in jobs]
+
+    assert shared_misfit(drives, records, tmp_path, QUICK, said.append, run=failing) == []
+    assert any("diagnosis failed (RuntimeError: worker lost)" in s for s in said)
+    assert json.loads((tmp_path / "misfit.json").read_text()) == []

@@ -3,6 +3,7 @@ the results written as drives finish, then the changes per car and the report.""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -115,77 +116,111 @@ def fleet(
         f"{len(drives)} drives of {len({d.car for d in drives})} cars; "
         f"{len(drives) - len(todo)} already answered"
     )
-    answered = 0
-    if todo:
-        answered = _run(todo, drives, out, settings, cluster, retrain, estimates, say)
-    keys = {d.key for d in drives}
-    records = [r for r in read_results(out, sid) if r["key"] in keys]
-    write_estimates(estimates, records)
-    changes = fleet_changes(records, settings.changes)
-    write_changes(out / "changes.csv", changes)
-    misfits = [] if settings.misfit is None else shared_misfit(drives, records, out, settings.misfit, say)
+    with contextlib.ExitStack() as stack:
+        client = _Client(stack, cluster, say)
+        answered = _run(todo, drives, out, settings, client, retrain, estimates, say) if todo else 0
+        keys = {d.key for d in drives}
+        records = [r for r in read_results(out, sid) if r["key"] in keys]
+        write_estimates(estimates, records)
+        changes = fleet_changes(records, settings.changes)
+        write_changes(out / "changes.csv", changes)
+        misfits = []
+        if settings.misfit is not None:
+            misfits = shared_misfit(drives, records, out, settings.misfit, say, run=client.map)
     seconds = time.perf_counter() - start
     write_report(out / "report.html", records, changes, seconds, misfits)
     return FleetResult(out, records, changes, misfits, answered, len(drives) - len(todo), seconds)
 
 
-def _run(todo, drives, out, settings, cluster, retrain, estimates, say) -> int:
+class _Client:
+    """The run's cluster client, started on first use (a re-run with nothing left to do starts
+    none) and closed with the run."""
+
+    def __init__(self, stack: contextlib.ExitStack, cluster: Cluster, say):
+        self.stack, self.cluster, self.say, self.client = stack, cluster, say, None
+
+    def __call__(self):
+        if self.client is None:
+            self.client = self.stack.enter_context(open_client(self.cluster))
+            self.say(f"cluster: {len(self.client.scheduler_info().get('workers', {}))} workers")
+        return self.client
+
+    def map(self, fn, jobs: list) -> list:
+        """`fn` over `jobs` on the workers, results in order; a job that failed (or that a
+        cluster left without workers could not run) gives its error instead."""
+        if not jobs:
+            return []
+        client = self()
+        stamp = time.time_ns()
+        futures = {
+            client.submit(fn, job, key=f"{fn.__name__}-{i}-{stamp}", pure=False): i
+            for i, job in enumerate(jobs)
+        }
+        results: list = [RuntimeError("not run: the cluster had no workers")] * len(jobs)
+        for future in _finished(client, futures, self.cluster, self.say):
+            try:
+                results[futures[future]] = future.result()
+            except Exception as err:  # noqa: BLE001 - one job failing leaves the others
+                results[futures[future]] = err
+        return results
+
+
+def _run(todo, drives, out, settings, run: _Client, retrain, estimates, say) -> int:
     """Submit each platform's preparation, then its drives (which wait for it); write each drive's
     rows as it finishes."""
     by_vehicle: dict[Path, list[Drive]] = {}
     for d in drives:
         by_vehicle.setdefault(d.vehicle, []).append(d)
-    with open_client(cluster) as client:
-        say(f"cluster: {len(client.scheduler_info().get('workers', {}))} workers")
-        prepared = {}
-        for vehicle, group in by_vehicle.items():
-            if any(d in todo for d in group):
-                prepared[vehicle] = client.submit(
-                    prepare_platform,
-                    vehicle,
-                    group,
-                    out=out,
-                    settings=settings.amortized,
-                    seed=settings.seed,
-                    retrain=retrain,
-                    key=f"platform-{vehicle.name}-{settings.ident}-{time.time_ns()}",
-                    pure=False,
-                )
-        futures = {
-            client.submit(
-                answer_drive,
-                d,
-                prepared[d.vehicle],
+    cluster, client = run.cluster, run()
+    prepared = {}
+    for vehicle, group in by_vehicle.items():
+        if any(d in todo for d in group):
+            prepared[vehicle] = client.submit(
+                prepare_platform,
+                vehicle,
+                group,
                 out=out,
+                settings=settings.amortized,
                 seed=settings.seed,
-                escalation=settings.escalation,
-                settings_id=settings.ident,
-                draws_per_window=settings.amortized.draws_per_window,
-                key=f"drive-{d.key}-{time.time_ns()}",
+                retrain=retrain,
+                key=f"platform-{vehicle.name}-{settings.ident}-{time.time_ns()}",
                 pure=False,
-            ): d
-            for d in todo
-        }
-        n, t0 = 0, time.perf_counter()
-        for future in _finished(client, futures, cluster, say):
-            d = futures[future]
-            n += 1
-            try:
-                record = future.result()
-            except Exception as err:  # the drive's workers died ALLOWED_FAILURES times
-                say(
-                    f"[{n}/{len(todo)}] {d.car} {d.name}: not answered ({type(err).__name__}); "
-                    "a re-run retries it"
-                )
-                continue
-            append_estimates(estimates, record)
-            rate = n / (time.perf_counter() - t0) * 3600
-            k = _k_text(record)
-            say(
-                f"[{n}/{len(todo)}] {d.car} {d.name}: {record['method']}{k} in {record['seconds']:.0f} s"
-                f" (attempt {record.get('attempt', 1)}; {rate:.0f} drives/h)"
-                + (f": {record['error']}" if record["method"] == "failed" else "")
             )
+    futures = {
+        client.submit(
+            answer_drive,
+            d,
+            prepared[d.vehicle],
+            out=out,
+            seed=settings.seed,
+            escalation=settings.escalation,
+            settings_id=settings.ident,
+            draws_per_window=settings.amortized.draws_per_window,
+            key=f"drive-{d.key}-{time.time_ns()}",
+            pure=False,
+        ): d
+        for d in todo
+    }
+    n, t0 = 0, time.perf_counter()
+    for future in _finished(client, futures, cluster, say):
+        d = futures[future]
+        n += 1
+        try:
+            record = future.result()
+        except Exception as err:  # the drive's workers died ALLOWED_FAILURES times
+            say(
+                f"[{n}/{len(todo)}] {d.car} {d.name}: not answered ({type(err).__name__}); "
+                "a re-run retries it"
+            )
+            continue
+        append_estimates(estimates, record)
+        rate = n / (time.perf_counter() - t0) * 3600
+        k = _k_text(record)
+        say(
+            f"[{n}/{len(todo)}] {d.car} {d.name}: {record['method']}{k} in {record['seconds']:.0f} s"
+            f" (attempt {record.get('attempt', 1)}; {rate:.0f} drives/h)"
+            + (f": {record['error']}" if record["method"] == "failed" else "")
+        )
     return n
 
 

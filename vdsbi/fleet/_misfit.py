@@ -120,33 +120,107 @@ def cars_missing_alone(records: list[dict], settings: MisfitSettings) -> dict[st
     return out
 
 
+#: Runs `diagnose_pooled` on each of a list of pooled-drive sets and returns their results in order:
+#: in this process by default; the fleet passes one that runs them on its cluster's workers.
+Mapper = Callable[[Callable[["Pooled"], "Misfit"], list["Pooled"]], list["Misfit | BaseException"]]
+
+
+@dataclasses.dataclass(frozen=True)
+class Pooled:
+    """One diagnosis to make: drives pooled for a platform (`car` None) or for one car alone."""
+
+    vehicle: Path
+    car: str | None
+    drives: tuple[Drive, ...]
+    out: Path
+    settings: MisfitSettings
+
+    @property
+    def name(self) -> str:
+        if self.car is None:
+            return f"platform-{safe_name(self.vehicle.stem)}"
+        return f"car-{safe_name(self.car)}"
+
+    @property
+    def folder(self) -> Path:
+        return self.out / "misfit" / self.name
+
+    @property
+    def ident(self) -> dict:
+        return {"drives": [d.key for d in self.drives], "options": repr(self.settings.options)}
+
+    def kept(self) -> Misfit | None:
+        """The diagnosis of these same drives with the same options, kept by an earlier run."""
+        kept = self.folder / "pooled.json"
+        if not kept.exists():
+            return None
+        record = json.loads(kept.read_text())
+        if record.get("ident") != self.ident:
+            return None
+        m = record["misfit"]
+        return Misfit(**m | {"drives": tuple(m["drives"]), "named": tuple(m["named"])})
+
+
+def in_process(fn, jobs):
+    """The default `Mapper`: one after another, here; a failed diagnosis is returned, not raised."""
+    out = []
+    for job in jobs:
+        try:
+            out.append(fn(job))
+        except Exception as err:  # noqa: BLE001 - one diagnosis failing leaves the others
+            out.append(err)
+    return out
+
+
 def shared_misfit(
     drives: list[Drive],
     records: list[dict],
     out: Path,
     settings: MisfitSettings = MisfitSettings(),
     say: Callable[[str], None] = lambda s: None,
+    run: Mapper = in_process,
 ) -> list[Misfit]:
-    """Diagnose each platform's pooled drives and each car that misses alone (module docstring);
-    write misfit.json. Drives not answered are left out."""
+    """Diagnose each platform's pooled drives and each car that misses alone (module docstring),
+    the diagnoses not kept from an earlier run through `run`; write misfit.json. Drives not
+    answered are left out; a diagnosis that fails is said and left out (a re-run retries it)."""
+    jobs = plan_misfit(drives, records, out, settings, say)
+    kept = [job.kept() for job in jobs]
+    todo = [job for job, k in zip(jobs, kept, strict=True) if k is None]
+    for job in todo:
+        say(f"diagnosing {job.name} on {len(job.drives)} pooled drive(s)")
+    done = iter(run(diagnose_pooled, todo))
+    found = []
+    for job, k in zip(jobs, kept, strict=True):
+        result = k if k is not None else next(done)
+        if isinstance(result, BaseException):
+            say(f"{job.name}: diagnosis failed ({type(result).__name__}: {result}); a re-run retries it")
+            continue
+        found.append(result)
+    write_text_atomically(out / "misfit.json", json.dumps([m.to_dict() for m in found], indent=1) + "\n")
+    return found
+
+
+def plan_misfit(
+    drives: list[Drive], records: list[dict], out: Path, settings: MisfitSettings, say=lambda s: None
+) -> list[Pooled]:
+    """The diagnoses to make: each platform's pool, and each car that misses alone."""
     answered = {r["key"]: r for r in records if r.get("method") not in (None, "failed")}
     by_platform: dict[Path, list[Drive]] = {}
     for d in drives:
         if d.key in answered:
             by_platform.setdefault(d.vehicle, []).append(d)
-    found = []
+    jobs = []
     for vehicle, group in by_platform.items():
         alone = cars_missing_alone([answered[d.key] for d in group], settings)
         latest = _latest(group)
         pooled = [ds[-1] for car, ds in latest.items() if car not in alone][-settings.most_cars :]
         if pooled:
-            found.append(_diagnosis("platform", vehicle, None, pooled, out, settings, say))
+            jobs.append(Pooled(vehicle, None, tuple(pooled), out, settings))
         for car, channels in alone.items():
             say(f"{car}: model error beyond its platform's on {', '.join(channels)}")
             own = latest[car][-settings.drives_per_car :]
-            found.append(_diagnosis("car", vehicle, car, own, out, settings, say))
-    write_text_atomically(out / "misfit.json", json.dumps([m.to_dict() for m in found], indent=1) + "\n")
-    return found
+            jobs.append(Pooled(vehicle, car, tuple(own), out, settings))
+    return jobs
 
 
 def _latest(group: list[Drive]) -> dict[str, list[Drive]]:
@@ -157,42 +231,34 @@ def _latest(group: list[Drive]) -> dict[str, list[Drive]]:
     return out
 
 
-def _diagnosis(scope, vehicle: Path, car, pooled: list[Drive], out: Path, settings, say) -> Misfit:
-    """`api.diagnose` on `pooled` into misfit/<scope>/, or the kept one for the same drives."""
+def diagnose_pooled(job: Pooled) -> Misfit:
+    """`api.diagnose` on the pooled drives into misfit/<name>/diagnose, kept beside their record."""
     from .. import api
 
-    name = f"platform-{safe_name(vehicle.stem)}" if car is None else f"car-{safe_name(car)}"
-    folder = out / "misfit" / name
-    keys = tuple(d.key for d in pooled)
-    ident = {"drives": list(keys), "options": repr(settings.options)}
-    kept = folder / "pooled.json"
-    if kept.exists() and json.loads(kept.read_text()).get("ident") == ident:
-        m = json.loads(kept.read_text())["misfit"]
-        return Misfit(**m | {"drives": tuple(m["drives"]), "named": tuple(m["named"])})
-    say(f"diagnosing {name} on {len(pooled)} pooled drive(s)")
-    report = folder / "diagnose"
+    report = job.folder / "diagnose"
     # an interrupted diagnosis left a partial folder: diagnose writes into an empty one
     shutil.rmtree(report, ignore_errors=True)
-    folder.mkdir(parents=True, exist_ok=True)
+    job.folder.mkdir(parents=True, exist_ok=True)
     found = api.diagnose(
-        [d.recording for d in pooled],
-        vehicle,
+        [d.recording for d in job.drives],
+        job.vehicle,
         report,
         quiet=True,
-        **dict(settings.options),
+        **dict(job.settings.options),
     )
     rep = found.report
     misfit = Misfit(
-        scope=scope,
-        platform=vehicle.stem,
-        car=car,
-        drives=keys,
+        scope="platform" if job.car is None else "car",
+        platform=job.vehicle.stem,
+        car=job.car,
+        drives=tuple(d.key for d in job.drives),
         detected=bool(rep["mismatch_detected"]),
         named=tuple(rep["chosen"]),
         claimed=rep.get("identify_command") is not None,
         verdict=str(rep["verdict"]),
         identify_command=rep.get("identify_command"),
-        folder=str(report.relative_to(out)),
+        folder=str(report.relative_to(job.out)),
     )
-    write_text_atomically(kept, json.dumps({"ident": ident, "misfit": misfit.to_dict()}, indent=1) + "\n")
+    record = {"ident": job.ident, "misfit": misfit.to_dict()}
+    write_text_atomically(job.folder / "pooled.json", json.dumps(record, indent=1) + "\n")
     return misfit
