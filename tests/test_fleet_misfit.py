@@ -10,8 +10,8 @@ import pandas as pd
 import pytest
 from drives import drive_csv
 
-from vdsbi.fleet._manifest import read_manifest
-from vdsbi.fleet._misfit import MisfitSettings, cars_missing_alone, shared_misfit
+from vdsbi.fleet._manifest import Drive, read_manifest
+from vdsbi.fleet._misfit import MisfitSettings, cars_missing_alone, plan_misfit, shared_misfit
 from vdsbi.simulator import default_vehicle
 
 
@@ -97,3 +97,16 @@ def test_a_failed_diagnosis_is_said_and_left_out_for_a_rerun(fleet_folder, tmp_p
     assert shared_misfit(drives, records, tmp_path, QUICK, said.append, run=failing) == []
     assert any("diagnosis failed (RuntimeError: worker lost)" in s for s in said)
     assert json.loads((tmp_path / "misfit.json").read_text()) == []
+
+
+def test_platforms_whose_vehicle_files_share_a_name_get_folders_of_their_own(tmp_path):
+    # every car of its own platform, each with its own vehicle.json (the shared real drives)
+    drives = [
+        Drive(car, "r.csv", tmp_path / car / "r.csv", tmp_path / car / "vehicle.json", "0", 0.0, i + 2)
+        for i, car in enumerate(("gti", "rav4", "race"))
+    ]
+    records = [{"car": d.car, "key": d.key, "method": "amortized+fit", "noise_ratio": {}} for d in drives]
+    jobs = plan_misfit(drives, records, tmp_path, MisfitSettings())
+    names = sorted(j.name for j in jobs)
+    assert names == ["platform-gti_vehicle", "platform-race_vehicle", "platform-rav4_vehicle"]
+    assert len({j.folder for j in jobs}) == 3

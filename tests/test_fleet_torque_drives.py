@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from vdsbi.fleet._platform import drive_problem
 
@@ -25,3 +26,23 @@ def test_a_torque_drive_without_a_measured_speed_is_read_torque_driven(tmp_path)
     cols |= {"torque_rear": np.zeros_like(t), "ax": np.zeros_like(t), "ay": 10.0 * r, "yaw_rate": r}
     pd.DataFrame(cols).to_csv(tmp_path / "no_speed.csv", index=False)
     assert drive_problem(tmp_path / "no_speed.csv", GOOD / "vehicle.json").longitudinal == "torque"
+
+
+def test_an_escalated_torque_drive_is_identified_as_the_fleet_read_it(tmp_path, monkeypatch):
+    # A drive whose logged torques are commanded, not applied, may not move the model as the car
+    # moved: identify must follow the measured speed, as the drive's amortized answer did.
+    from vdsbi import api
+    from vdsbi.fleet._drive import Escalation, _identify
+    from vdsbi.fleet._manifest import Drive
+
+    seen = {}
+
+    def fake_identify(recording, vehicle, options, **kw):
+        seen["longitudinal"] = options.drive.longitudinal
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(api, "identify", fake_identify)
+    drive = Drive("car", "r", GOOD / "recording.csv", GOOD / "vehicle.json", "0", 0.0, 2)
+    with pytest.raises(RuntimeError, match="stop here"):
+        _identify(drive, None, tmp_path, Escalation(), "check failed", {}, None)
+    assert seen["longitudinal"] == "speed"

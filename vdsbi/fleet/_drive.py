@@ -177,14 +177,14 @@ def _answer(
         except InputError as err:
             why = err.detail
     if why is not None:
-        return _identify(drive, platform, folder, escalation, why, stages)
+        return _identify(drive, platform, folder, escalation, why, stages, problem)
     box, effects = platform.box, platform.effects
     estimator = _timed(stages, "load", _estimator, est_folder, platform)
     x, has = drive_x(problem)
     try:
         proposal = _timed(stages, "amortized", drive_proposal, k_prop, estimator, x, has, draws_per_window)
     except np.linalg.LinAlgError as err:  # the estimator's draws have no finite spread
-        return _identify(drive, platform, folder, escalation, f"no amortized answer ({err})", stages)
+        return _identify(drive, platform, folder, escalation, f"no amortized answer ({err})", stages, problem)
     check = _timed(
         stages,
         "check",
@@ -237,7 +237,7 @@ def _answer(
     why = (
         f"importance check failed after the fit: k̂ {check.k_hat:.2f} > {k_threshold(len(check.weights)):.2f}"
     )
-    return _identify(drive, platform, folder, escalation, why, stages) | {"checks": checks}
+    return _identify(drive, platform, folder, escalation, why, stages, problem) | {"checks": checks}
 
 
 def _laplace(fit, box) -> Proposal:
@@ -269,10 +269,20 @@ def _checked(method: str, check: CheckResult, box, checks: dict) -> dict:
     }
 
 
-def _identify(drive: Drive, platform, folder: Path, escalation: Escalation, why: str, stages) -> dict:
-    """The full `identify` into the drive's folder (kept for `predict` and `export`)."""
+def _identify(
+    drive: Drive, platform, folder: Path, escalation: Escalation, why: str, stages, problem
+) -> dict:
+    """The full `identify` into the drive's folder (kept for `predict` and `export`), reading the
+    drive as the fleet read it (`problem`: following the measured speed where it has one; a
+    recording's commanded torques need not move the model as the car moved)."""
     from .. import api
 
+    if problem is None:
+        try:
+            problem = drive_problem(drive.recording, drive.vehicle)
+        except InputError:
+            problem = None  # identify says what is wrong with the drive
+    mode = "auto" if problem is None else problem.longitudinal
     target = folder / "identify"
     resume = target.exists() and any(target.iterdir())
     res = _timed(
@@ -282,7 +292,7 @@ def _identify(drive: Drive, platform, folder: Path, escalation: Escalation, why:
         str(drive.recording),
         str(drive.vehicle),
         api.IdentifyOptions(
-            drive=api.DriveOptions(holdout=0.0),
+            drive=api.DriveOptions(holdout=0.0, longitudinal=mode),
             model=api.ModelOptions(effects=None if platform is None else tuple(platform.effects)),
             budget=api.Budget(
                 rounds=escalation.rounds,

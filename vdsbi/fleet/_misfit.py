@@ -130,6 +130,7 @@ class Pooled:
     """One diagnosis to make: drives pooled for a platform (`car` None) or for one car alone."""
 
     vehicle: Path
+    platform: str
     car: str | None
     drives: tuple[Drive, ...]
     out: Path
@@ -138,7 +139,7 @@ class Pooled:
     @property
     def name(self) -> str:
         if self.car is None:
-            return f"platform-{safe_name(self.vehicle.stem)}"
+            return f"platform-{safe_name(self.platform)}"
         return f"car-{safe_name(self.car)}"
 
     @property
@@ -209,18 +210,26 @@ def plan_misfit(
     for d in drives:
         if d.key in answered:
             by_platform.setdefault(d.vehicle, []).append(d)
+    labels = platform_labels(list(by_platform))
     jobs = []
     for vehicle, group in by_platform.items():
         alone = cars_missing_alone([answered[d.key] for d in group], settings)
         latest = _latest(group)
         pooled = [ds[-1] for car, ds in latest.items() if car not in alone][-settings.most_cars :]
         if pooled:
-            jobs.append(Pooled(vehicle, None, tuple(pooled), out, settings))
+            jobs.append(Pooled(vehicle, labels[vehicle], None, tuple(pooled), out, settings))
         for car, channels in alone.items():
             say(f"{car}: model error beyond its platform's on {', '.join(channels)}")
             own = latest[car][-settings.drives_per_car :]
-            jobs.append(Pooled(vehicle, car, tuple(own), out, settings))
+            jobs.append(Pooled(vehicle, labels[vehicle], car, tuple(own), out, settings))
     return jobs
+
+
+def platform_labels(vehicles: list[Path]) -> dict[Path, str]:
+    """Each platform's name: its vehicle file's stem, with the folder before it where two
+    platforms' files share a stem (every car's own vehicle.json)."""
+    stems = [v.stem for v in vehicles]
+    return {v: v.stem if stems.count(v.stem) == 1 else f"{v.parent.name}/{v.stem}" for v in vehicles}
 
 
 def _latest(group: list[Drive]) -> dict[str, list[Drive]]:
@@ -249,7 +258,7 @@ def diagnose_pooled(job: Pooled) -> Misfit:
     rep = found.report
     misfit = Misfit(
         scope="platform" if job.car is None else "car",
-        platform=job.vehicle.stem,
+        platform=job.platform,
         car=job.car,
         drives=tuple(d.key for d in job.drives),
         detected=bool(rep["mismatch_detected"]),
