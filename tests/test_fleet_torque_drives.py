@@ -46,3 +46,23 @@ def test_an_escalated_torque_drive_is_identified_as_the_fleet_read_it(tmp_path, 
     with pytest.raises(RuntimeError, match="stop here"):
         _identify(drive, None, tmp_path, Escalation(), "check failed", {}, None)
     assert seen["longitudinal"] == "speed"
+
+
+def test_every_window_the_cut_makes_fits_its_longest_window(tmp_path):
+    # the cut moves window edges to quiet moments, past the nominal `max_window`: the fleet pads
+    # every window to `longest_window`, so none may exceed it
+    from vdsbi.fleet._manifest import read_manifest
+    from vdsbi.fleet._simulated import simulated_fleet
+    from vdsbi.io import load_drive
+    from vdsbi.problem import ProblemSettings, make_problem
+
+    (drive, *_) = read_manifest(simulated_fleet(tmp_path, cars=1, drives=1, duration=40.0, changes=()))
+    rec, veh = load_drive(drive.recording, drive.vehicle)
+    beyond, ratios = 0, []
+    for max_window in (2.0, 3.0, 5.0):
+        settings = ProblemSettings(max_window=max_window, held_out=0.0, longitudinal="speed")
+        lengths = [w.t1 - w.t0 for w in make_problem(rec, veh, settings).windows]
+        beyond += sum(x > max_window + 1e-9 for x in lengths)
+        ratios += [x / settings.longest_window for x in lengths]
+    assert beyond > 0  # the property is exercised
+    assert max(ratios) <= 1.0 + 1e-9

@@ -27,9 +27,11 @@ from ..simulator.models import LongitudinalMode
 
 #: Longest window of a fleet drive, s: identify's for drives that follow the measured speed.
 MAX_WINDOW = 10.0
-#: Fixed length every window is padded to, s (`fixed_shape`): windows start at the quietest
-#: moment near their nominal edges and run somewhat past `MAX_WINDOW`.
-WINDOW_SECONDS = 15.0
+#: How a fleet drive is read: following the measured speed, all of it fitted.
+DRIVE_SETTINGS = ProblemSettings(max_window=MAX_WINDOW, held_out=0.0, longitudinal="speed")
+#: Fixed length every window is padded to, s (`fixed_shape`): the longest window the cut makes
+#: (its edges move to the quietest moments nearby, past `MAX_WINDOW`).
+WINDOW_SECONDS = DRIVE_SETTINGS.longest_window
 
 
 def drive_problem(recording: Path, vehicle: Path) -> Problem:
@@ -40,13 +42,12 @@ def drive_problem(recording: Path, vehicle: Path) -> Problem:
     then not identified); one without a measured speed is read torque-driven, and `identify`
     answers it."""
     rec, veh = load_drive(recording, vehicle)
-    settings = ProblemSettings(max_window=MAX_WINDOW, held_out=0.0, longitudinal="speed")
     try:
-        return make_problem(rec, veh, settings)
+        return make_problem(rec, veh, DRIVE_SETTINGS)
     except InputError:
         if not rec.has_torques:
             raise
-        return make_problem(rec, veh, dataclasses.replace(settings, longitudinal="torque"))
+        return make_problem(rec, veh, dataclasses.replace(DRIVE_SETTINGS, longitudinal="torque"))
 
 
 def platform_effects(problems: Sequence[Problem]) -> tuple[str, ...]:

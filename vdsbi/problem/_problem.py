@@ -19,7 +19,7 @@ import numpy as np
 from ..simulator import CHANNELS, GRAVITY, Inputs, Vehicle
 from ..simulator.measurement import Decimator
 from ..simulator.models import LONGITUDINAL_MODES, LongitudinalChoice, LongitudinalMode, model_class
-from ._windows import Window
+from ._windows import EDGE_SEARCH, Window
 
 #: A problem's samples: the fitted ones, the held-out ones, or every usable one.
 Part = Literal["train", "held", "valid"]
@@ -72,6 +72,12 @@ class ProblemSettings:
             raise ValueError(f"held_out must lie in [0, 1), got {self.held_out}")
         if not self.max_window > 0:
             raise ValueError(f"max_window must be > 0, got {self.max_window}")
+
+    @property
+    def longest_window(self) -> float:
+        """The longest window these settings cut, s: `max_window` with both edges moved out to
+        the quietest moments nearby (`quiet_edges`)."""
+        return self.max_window * (1.0 + 2.0 * EDGE_SEARCH if self.quiet_edges else 1.0)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
