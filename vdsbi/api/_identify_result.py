@@ -7,11 +7,15 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..diagnostics import ridge_sentence
+
+if TYPE_CHECKING:  # annotations only
+    from ..inference import Posterior
+    from ..problem import Problem
 
 
 @dataclasses.dataclass
@@ -35,13 +39,13 @@ class IdentifyResult:
             the likelihood by `vdsbi.estimation.screened_sample`), what `predict --band` uses.
     """
 
-    neural_posterior: Any
+    neural_posterior: Posterior
     samples: np.ndarray
     summary: dict[str, Any]
     out_dir: Path | None = None
-    problem: Any = None
+    problem: Problem | None = None
     ppc: dict[str, Any] | None = None
-    validation: Any = None
+    validation: Problem | None = None
     predictive: np.ndarray | None = None
 
     @property
