@@ -156,7 +156,7 @@ def _propose(
     if problem.truncate:
         seq = problem.config.sequential
         theta, tinfo = truncated_prior(
-            key, flow, problem.prior, problem.x_o, n, seq.truncation_epsilon, seq.truncation_samples
+            key, flow, problem.prior, problem.x_o, n, seq.truncation.epsilon, seq.truncation.samples
         )
         return theta, {"proposal": "truncated_prior", **tinfo}
     k_draw, k_mass = jax.random.split(key)
@@ -234,12 +234,7 @@ def _train_round(
     if r == 0 or problem.truncate:
         loss = first_round_loss(config.flow)
     else:
-        loss = AtomicLoss(
-            num_atoms=seq.num_atoms,
-            leak_weight=seq.leak_weight,
-            leak_rows=seq.leak_rows,
-            leak_at=np.asarray(problem.x_o) if seq.leak_at_observation else None,
-        )
+        loss = _atomic_loss(seq, problem.x_o)
     flow, finfo = fit(
         k_train,
         flow,
@@ -255,6 +250,19 @@ def _train_round(
     )
     info = {"loss": type(loss).__name__, "patience": patience, "cosine_decay": training.cosine_decay}
     return flow, {**finfo, **info, "max_epochs": training.max_epochs}
+
+
+def _atomic_loss(seq: SequentialSettings, x_o: Array) -> AtomicLoss:
+    """The atomic loss of ``seq``, with its `LeakPenalty` if any."""
+    leak = seq.leak
+    if leak is None:
+        return AtomicLoss(num_atoms=seq.num_atoms)
+    return AtomicLoss(
+        num_atoms=seq.num_atoms,
+        leak_weight=leak.weight,
+        leak_rows=leak.rows,
+        leak_at=np.asarray(x_o) if leak.at_observation else None,
+    )
 
 
 _MIN_PATIENCE = 2

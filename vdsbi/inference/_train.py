@@ -12,7 +12,7 @@ import optax
 from jaxtyping import PRNGKeyArray
 
 from ..runtime import in_background
-from ._config import TrainingSettings
+from ._config import TrainingSettings, WeightAveraging
 from ._estimator import AbstractEstimator
 from ._loss import AbstractLoss
 from ._sharding import data_mesh, replicate, stack_batches
@@ -223,16 +223,14 @@ def _train_epoch(state, keys, data, tr: np.ndarray, bsz: int, block: int, mesh, 
     return (flow, opt_state, avg), float(total) / nb
 
 
-def _train_state(flow, optimizer, mesh, average_epochs: float, steps_per_epoch: int):
+def _train_state(flow, optimizer, mesh, averaging: WeightAveraging | None, steps_per_epoch: int):
     """``(flow, opt_state, avg_flow or None)`` replicated over ``mesh``, and the per-step EMA
-    decay whose time constant is ``average_epochs`` epochs (None when averaging is off)."""
-    if average_epochs < 0:
-        raise ValueError(f"average_epochs must be >= 0, got {average_epochs}")
+    decay of ``averaging`` (None when it is off)."""
     flow = replicate(flow, mesh)
     opt_state = replicate(init_opt_state(flow, optimizer), mesh)
-    if average_epochs == 0:
+    if averaging is None:
         return (flow, opt_state, None), None
-    decay = 1.0 - 1.0 / max(average_epochs * steps_per_epoch, 1.0)
+    decay = 1.0 - 1.0 / max(averaging.epochs * steps_per_epoch, 1.0)
     return (flow, opt_state, flow), replicate(jnp.asarray(decay), mesh)
 
 
@@ -307,15 +305,14 @@ def fit(
     masked no-op steps), so per-step Python dispatch is amortised and the loop is compiled once
     per loss and batch size, not once per data size. ``cosine_decay`` (see
     `cosine_learning_rate`) sets the learning rate per epoch over ``max_epochs``.
-    ``average_epochs`` > 0: validation, early stopping and the returned flow use an exponential
-    moving average of the weights with a time constant of that many epochs, started from
-    ``flow`` (it damps the SGD noise a short, early-stopped round leaves in the weights).
+    With ``averaging`` (`WeightAveraging`), validation, early stopping and the returned flow
+    use an exponential moving average of the weights, started from ``flow``.
     """
     optimizer = make_optimizer(training) if optimizer is None else optimizer
     mesh = data_mesh() if mesh is None else mesh
     tr, va = np.flatnonzero(~is_val), np.flatnonzero(is_val)
     bsz, vsz = _batch_sizes(tr.size, va.size, training.batch_size, mesh.devices.size)
-    state, decay = _train_state(flow, optimizer, mesh, training.average_epochs, tr.size // bsz)
+    state, decay = _train_state(flow, optimizer, mesh, training.averaging, tr.size // bsz)
     key, val_key = jax.random.split(key)
     data = (theta, x, prior_mask)
     val_batches = _validation_blocks(data, va, vsz, steps_per_call, mesh)
