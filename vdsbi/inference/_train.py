@@ -3,6 +3,7 @@
 import functools
 import math
 from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -200,10 +201,26 @@ def _validation_blocks(data, va: np.ndarray, vsz: int, block: int, mesh) -> list
     ]
 
 
-def _train_epoch(state, keys, data, tr: np.ndarray, bsz: int, block: int, mesh, loss, optimizer, decay):
-    """One pass over a random permutation of the training rows ``tr`` (``keys = (k_perm, k_steps)``),
-    in compiled blocks of ``block`` steps. ``state = (flow, opt_state, avg_flow or None)``; returns
-    the new state and the mean training loss."""
+class _Epochs(NamedTuple):
+    """What stays fixed over `fit`'s epochs: the data and its training rows ``tr``, the batch
+    size, the steps per compiled block, the mesh, the loss, the optimiser and the EMA decay
+    (None: no averaging)."""
+
+    data: tuple
+    tr: np.ndarray
+    bsz: int
+    block: int
+    mesh: Any
+    loss: AbstractLoss
+    optimizer: optax.GradientTransformation
+    decay: Any
+
+
+def _train_epoch(state, keys, epochs: _Epochs):
+    """One pass over a random permutation of the training rows (``keys = (k_perm, k_steps)``),
+    in compiled blocks. ``state = (flow, opt_state, avg_flow or None)``; returns the new state
+    and the mean training loss."""
+    data, tr, bsz, block, mesh, loss, optimizer, decay = epochs
     flow, opt_state, avg = state
     k_perm, k_steps = keys
     nb = tr.size // bsz
@@ -319,12 +336,12 @@ def fit(
     # The validation loop compiles on a second thread while the first training block
     # compiles (XLA compiles without holding the GIL); its value, the initial loss, is unused.
     warm = in_background(eval_steps, state[0], val_batches[0][0], val_key, loss, val_batches[0][1])
-    epoch_args = (data, tr, bsz, steps_per_call, mesh, loss, optimizer, decay)  # fixed over epochs
+    epochs = _Epochs(data, tr, bsz, steps_per_call, mesh, loss, optimizer, decay)
     stopping = _EarlyStopping(state[0], training.patience)
     for epoch in range(training.max_epochs):
         key, k_perm, k_steps = jax.random.split(key, 3)
         state = _scheduled(state, training, epoch)
-        state, train_loss = _train_epoch(state, (k_perm, k_steps), *epoch_args)
+        state, train_loss = _train_epoch(state, (k_perm, k_steps), epochs)
         flow = state[0] if state[2] is None else state[2]
         warm.result()  # compiled (or raised) before the loop calls it: never compiled twice
         val_loss = _validation_loss(flow, val_batches, val_key, loss)
