@@ -157,7 +157,7 @@ def _problem(model, theta, limits, target: str, channels, noise):
     )
 
 
-def _bounds(model, theta, limits, maneuvers: tuple, fisher: dict, target: str, noise: str) -> dict:
+def _bounds(model, theta, limits, maneuvers: tuple, fisher: dict, target: str, noise: NoiseName) -> dict:
     """bounds.json (`noise`: the noise model's name): the Fisher reports of `_reports` for
     ``maneuvers = (start, designed)``, the improvement per parameter (CRB std before / after)
     and the designed maneuver's limits check."""

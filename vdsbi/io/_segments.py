@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from typing import Literal
 
 import numpy as np
 import pandas as pd
@@ -34,7 +35,9 @@ class Segment:
         return self.t1 - self.t0
 
 
-def _rolling(x: np.ndarray, n: int, how: str) -> np.ndarray:
+def _rolling(x: np.ndarray, n: int, how: Literal["mean", "std"]) -> np.ndarray:
+    if how not in ("mean", "std"):
+        raise ValueError(f"how must be 'mean' or 'std', got {how!r}")
     r = pd.Series(x).rolling(n, center=True, min_periods=1)
     return getattr(r, how)().to_numpy()
 
