@@ -11,6 +11,7 @@ from vdsbi.inference import (
     SplineFlowSettings,
     TrainingSettings,
 )
+from vdsbi.inference._config import LeakPenalty, Truncation, WeightAveraging
 from vdsbi.inference._standardize import GlobalStandardization, NoStandardization, TrajectoryStandardization
 from vdsbi.inference._theta_map import IdentityMap, LogitMap
 
@@ -37,6 +38,8 @@ _X_STANDARDIZE = {
         NoStandardization(),
     )
 }
+#: Settings records stored under flat names (`_flat_records`), so results files keep their keys.
+_RECORDS = ("averaging", "leak", "truncation")
 #: Fields of cells run before they were removed from the library, at the value that made them no-ops.
 RETIRED = {
     "retrain_from_scratch": False,
@@ -60,7 +63,9 @@ def flat_config(config: NPEConfig) -> dict:
     out.update({k: getattr(other, v) for k, v in _FMPE_FIELDS.items()})
     out.update(estimator="fmpe" if fmpe else "nsf", theta_map=flow.theta_map.name)
     out["x_standardize"] = flow.x_standardize.name
-    out |= dataclasses.asdict(config.training) | dataclasses.asdict(config.sequential)
+    for group in (config.training, config.sequential):
+        out |= {f.name: getattr(group, f.name) for f in dataclasses.fields(group) if f.name not in _RECORDS}
+    out |= _flat_records(config.training, config.sequential)
     for field, (stored, words) in _WORDS.items():
         out[stored] = words[out.pop(field)]
     return out
@@ -79,6 +84,41 @@ def make_config(**fields) -> NPEConfig:
         flow = FlowMatchingSettings(**{v: f[k] for k, v in _FMPE_FIELDS.items()}, **common)
     else:
         flow = SplineFlowSettings(**{k: f[k] for k in _SPLINE_FIELDS}, **common)
+    records = _records(f)
     groups = [(TrainingSettings, "training"), (SequentialSettings, "sequential")]
-    kw = {g: cls(**{x.name: f[x.name] for x in dataclasses.fields(cls)}) for cls, g in groups}
+    kw = {
+        g: cls(
+            **{x.name: records[x.name] if x.name in _RECORDS else f[x.name] for x in dataclasses.fields(cls)}
+        )
+        for cls, g in groups
+    }
     return NPEConfig(flow=flow, **kw)
+
+
+def _flat_records(training: TrainingSettings, sequential: SequentialSettings) -> dict:
+    """The optional records of `_RECORDS` under their flat names, an absent one at its no-op values."""
+    avg, leak, trunc = training.averaging, sequential.leak, sequential.truncation
+    return {
+        "average_epochs": 0.0 if avg is None else avg.epochs,
+        "leak_weight": 0.0 if leak is None else leak.weight,
+        "leak_rows": 0 if leak is None else leak.rows,
+        "leak_at_observation": False if leak is None else leak.at_observation,
+        "truncation_epsilon": trunc.epsilon,
+        "truncation_samples": trunc.samples,
+    }
+
+
+def _records(f: dict) -> dict:
+    """`_flat_records` read back: the records of the flat fields ``f``."""
+    if f["leak_at_observation"] and f["leak_weight"] == 0:
+        raise ValueError("leak_at_observation needs leak_weight > 0 (it adds to that penalty)")
+    leak = None
+    if f["leak_weight"] != 0:
+        leak = LeakPenalty(
+            weight=f["leak_weight"], rows=f["leak_rows"], at_observation=f["leak_at_observation"]
+        )
+    return {
+        "averaging": None if f["average_epochs"] == 0 else WeightAveraging(epochs=f["average_epochs"]),
+        "leak": leak,
+        "truncation": Truncation(epsilon=f["truncation_epsilon"], samples=f["truncation_samples"]),
+    }

@@ -50,7 +50,7 @@ from _grid_plot import plot_grid  # noqa: E402
 from tasks import get_task  # noqa: E402
 
 from vdsbi.diagnostics import c2st  # noqa: E402
-from vdsbi.inference import IdentityEmbedding, NPEConfig, TrainingSettings, apt  # noqa: E402
+from vdsbi.inference import IdentityEmbedding, NPEConfig, apt  # noqa: E402
 from vdsbi.runtime import release_compiled_programs  # noqa: E402
 
 PUBLISHED = {  # sbibm (Lueckmann et al. 2021), mean C2ST over 10 observations, sbi + NSF
@@ -110,7 +110,7 @@ def config_for(budget: int, method: str = "npe", **overrides) -> NPEConfig:
         max_epochs=500,
         theta_map="affine",
         patience_unit="epochs" if method == "tsnpe" or (method == "apt" and budget < 10_000) else "new_data",
-        average_epochs=1.0 if method in ("npe", "apt") else TrainingSettings().average_epochs,
+        average_epochs=1.0 if method in ("npe", "apt") else 0.0,
     )
     own = {"fmpe": FMPE, "apt": APT}.get(method, {})
     if method == "apt" and budget >= 100_000:

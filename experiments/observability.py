@@ -99,7 +99,7 @@ def identification(key, model, inputs, v0, fisher, num_seeds, num_iters=12):
 
     def one(x):
         fn = lambda z: ((mean(z) - x) / fisher.std).reshape(-1)
-        sol = levenberg_marquardt(fn, z0, max_steps=num_iters, rtol=0.0, damping=1e-3)
+        sol = levenberg_marquardt(fn, z0, max_steps=num_iters, rtol=0.0)
         return sol.z, sol.cost, laplace_covariance(sol.jacobian)
 
     z, cost, cov_z = (np.asarray(a) for a in jax.jit(jax.vmap(one))(xs))

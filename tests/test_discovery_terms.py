@@ -97,7 +97,7 @@ def _section(
 ):
     from types import SimpleNamespace as NS
 
-    from vdsbi.discovery._terms import terms_section
+    from vdsbi.discovery._terms import HeldOutScores, terms_section
 
     td = None
     if terms is not None:
@@ -109,11 +109,8 @@ def _section(
         chosen=effects,
         terms=td,
         p_terms=p_terms,
-        held_after=held_after,
-        held_terms=held_terms,
-        n_held=100,
+        held=HeldOutScores(held_after, held_terms, 100, tau),
         alpha=0.05,
-        tau=tau,
     )
 
 

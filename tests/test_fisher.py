@@ -9,7 +9,7 @@ import pytest
 
 from vdsbi.diagnostics import fisher_report, model_fisher, score_fisher_mc
 from vdsbi.diagnostics._fisher import fisher_from_jacobian, fisher_information, noise_std, scaled_mean_fn
-from vdsbi.estimation import laplace_covariance, levenberg_marquardt
+from vdsbi.estimation import GaussianPrior, StepControl, laplace_covariance, levenberg_marquardt
 from vdsbi.simulator import (
     CHANNELS,
     PARAM_NAMES,
@@ -154,7 +154,11 @@ def test_levenberg_marquardt_with_prior_is_ridge_and_compiles_once(x64, getkey):
     def fit(z0, max_steps):
         traces.append(None)
         return levenberg_marquardt(
-            lambda z: a @ z - y, z0, prior_precision=prec, prior_mean=mean, max_steps=max_steps, damping=1e-9
+            lambda z: a @ z - y,
+            z0,
+            prior=GaussianPrior(prec, mean),
+            max_steps=max_steps,
+            control=StepControl(damping=1e-9),
         )
 
     short, sol = fit(jnp.zeros(3), 1), fit(jnp.zeros(3), 10)

@@ -20,6 +20,7 @@ from vdsbi.inference import (
     save_state,
 )
 from vdsbi.inference._build import build_flow
+from vdsbi.inference._config import LeakPenalty, Truncation, WeightAveraging
 from vdsbi.inference._loss import (
     AtomicLoss,
     MaximumLikelihoodLoss,
@@ -320,14 +321,14 @@ def test_apt_rounds_compile_a_bounded_number_of_shapes(getkey, monkeypatch):
     assert [eqx.debug.get_num_traces(f) for f in counted] == first
 
 
-@pytest.mark.parametrize("average_epochs", [0.0, 1.0])
-def test_npe_on_given_simulations_learns_and_checks_shapes(average_epochs, getkey):
+@pytest.mark.parametrize("averaging", [None, WeightAveraging(epochs=1.0)])
+def test_npe_on_given_simulations_learns_and_checks_shapes(averaging, getkey):
     from vdsbi.inference import npe
 
     prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
     theta = np.asarray(prior.sample(getkey(), 512))
     x = np.asarray(_gauss_sim(getkey(), theta)[0])
-    cfg = _with(TINY, max_epochs=8, average_epochs=average_epochs)
+    cfg = _with(TINY, max_epochs=8, averaging=averaging)
     flow, info = npe(getkey(), prior, theta, x, embedding=IdentityEmbedding(2), config=cfg)
     assert info["epochs"] <= 8 and np.all(np.isfinite(info["val_losses"]))
     # trained: the validation loss ends below where it started (x = θ + small noise is informative)
@@ -401,14 +402,18 @@ def test_config_fields_are_checked():
         SplineFlowSettings(x_standardize="channel")
     with pytest.raises(TypeError, match="flow"):
         NPEConfig(flow=TrainingSettings())
-    with pytest.raises(ValueError, match="average_epochs"):
-        TrainingSettings(average_epochs=-1.0)
-    with pytest.raises(ValueError, match="leak_weight"):
-        SequentialSettings(leak_weight=-0.1)
-    with pytest.raises(ValueError, match="leak_rows"):
-        SequentialSettings(leak_rows=-1)
-    with pytest.raises(ValueError, match="leak_at_observation"):
-        SequentialSettings(leak_at_observation=True)
+    with pytest.raises(ValueError, match="epochs"):
+        WeightAveraging(epochs=-1.0)
+    with pytest.raises(TypeError, match="averaging"):
+        TrainingSettings(averaging=1.0)
+    with pytest.raises(ValueError, match="weight"):
+        LeakPenalty(weight=-0.1)
+    with pytest.raises(ValueError, match="rows"):
+        LeakPenalty(weight=1.0, rows=-1)
+    with pytest.raises(TypeError, match="leak"):
+        SequentialSettings(leak=10.0)
+    with pytest.raises(ValueError, match="epsilon"):
+        Truncation(epsilon=0.0)
 
 
 def test_fit_takes_an_optax_optimizer(getkey):
@@ -528,9 +533,7 @@ def test_penalty_at_the_observation_keeps_more_of_its_posterior_in_the_box(getke
         cfg = _with(
             TINY,
             theta_map=IdentityMap(),
-            leak_weight=10.0,
-            leak_rows=8,
-            leak_at_observation=at,
+            leak=LeakPenalty(weight=10.0, rows=8, at_observation=at),
             max_epochs=20,
             patience=20,
         )

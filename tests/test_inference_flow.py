@@ -6,7 +6,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vdsbi.inference import BoxPrior, ChannelStandardization, IdentityEmbedding, MLPEmbedding, Posterior
+from vdsbi.inference import (
+    BoxPrior,
+    ChannelStandardization,
+    IdentityEmbedding,
+    MLPEmbedding,
+    Posterior,
+    SplineFlowSettings,
+)
 from vdsbi.inference._flow import ConditionalFlow
 from vdsbi.inference._standardize import GlobalStandardization, Standardizer, TrajectoryStandardization
 from vdsbi.inference._theta_map import IdentityMap
@@ -23,7 +30,9 @@ def _perturbed(flow, key, scale):
 
 def test_flow_density_integrates_to_one(getkey):
     prior = BoxPrior(jnp.array([-1.0, 0.0]), jnp.array([2.0, 1.5]))
-    flow = ConditionalFlow(getkey(), prior, IdentityEmbedding(1), (1,), num_layers=3, num_bins=6, hidden=16)
+    flow = ConditionalFlow(
+        getkey(), prior, IdentityEmbedding(1), (1,), SplineFlowSettings(num_layers=3, num_bins=6, hidden=16)
+    )
     flow = _perturbed(flow, getkey(), 0.1)
     n = 600
     g0 = jnp.linspace(-1.0, 2.0, n + 1)
@@ -41,7 +50,9 @@ def test_flow_density_integrates_to_one(getkey):
 
 def test_samples_never_leave_prior_box(getkey):
     prior = BoxPrior(jnp.array([-1.0, 5.0, 0.0]), jnp.array([1.0, 5.001, 100.0]))
-    flow = ConditionalFlow(getkey(), prior, IdentityEmbedding(2), (2,), num_layers=2, num_bins=4, hidden=8)
+    flow = ConditionalFlow(
+        getkey(), prior, IdentityEmbedding(2), (2,), SplineFlowSettings(num_layers=2, num_bins=4, hidden=8)
+    )
     flow = _perturbed(flow, getkey(), 3.0)  # wild weights push mass against the box edges
     post = Posterior(flow, jnp.array([50.0, -50.0]))
     s = np.asarray(post.sample(getkey(), 20_000))
@@ -67,7 +78,9 @@ def test_flow_with_time_channel_inputs(getkey):
     assert GlobalStandardization().fit(xs).mean.shape == ()
     prior = BoxPrior(jnp.zeros(2), jnp.ones(2))
     emb = MLPEmbedding(getkey(), t * c, 8, 16, 1)
-    flow = ConditionalFlow(getkey(), prior, emb, (t, c), num_layers=2, hidden=8, x_standardizer=std)
+    flow = ConditionalFlow(
+        getkey(), prior, emb, (t, c), SplineFlowSettings(num_layers=2, hidden=8), x_standardizer=std
+    )
     lp = jax.vmap(flow.log_prob)(jnp.full((64, 2), 0.5), xs)
     assert lp.shape == (64,) and np.all(np.isfinite(np.asarray(lp)))
 
@@ -97,8 +110,7 @@ def test_trajectory_standardisation_exposes_small_deviations(getkey, tmp_path):
         prior,
         MLPEmbedding(getkey(), t * 2, 8, 16, 1),
         (t, 2),
-        num_layers=2,
-        hidden=8,
+        SplineFlowSettings(num_layers=2, hidden=8),
         x_standardizer=std,
     )
     post = Posterior(flow, xs[0])
@@ -119,8 +131,8 @@ def _grid_mass(post, low, high, n=400):
 
 def test_a_conditional_flow_is_normalised_conditional_and_round_trips(getkey, tmp_path):
     prior = BoxPrior(jnp.array([-1.0, 0.0]), jnp.array([2.0, 1.5]))
-    kw = dict(num_layers=3, num_bins=6, hidden=16)
-    flow = ConditionalFlow(getkey(), prior, IdentityEmbedding(1), (1,), **kw)
+    architecture = SplineFlowSettings(num_layers=3, num_bins=6, hidden=16)
+    flow = ConditionalFlow(getkey(), prior, IdentityEmbedding(1), (1,), architecture)
     flow = _perturbed(flow, getkey(), 0.1)
     masses, lps = zip(
         *(
@@ -147,10 +159,7 @@ def test_affine_theta_map_cuts_the_density_at_the_box_and_samples_inside(getkey,
         prior,
         IdentityEmbedding(1),
         (1,),
-        num_layers=2,
-        num_bins=6,
-        hidden=16,
-        theta_map=IdentityMap(),
+        SplineFlowSettings(num_layers=2, num_bins=6, hidden=16, theta_map=IdentityMap()),
         theta_standardizer=std,
     )
     flow = _perturbed(flow, getkey(), 0.1)

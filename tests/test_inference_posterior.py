@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vdsbi.inference import BoxPrior, ChannelStandardization, MLPEmbedding, Posterior
+from vdsbi.inference import BoxPrior, ChannelStandardization, MLPEmbedding, Posterior, SplineFlowSettings
 from vdsbi.inference._flow import ConditionalFlow
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -29,7 +29,12 @@ def _posterior(key):
     xs = jax.random.normal(k1, (32, 6, 2)) * 3.0 + 1.0
     emb = MLPEmbedding(k2, 12, 5, width=16, depth=1)
     flow = ConditionalFlow(
-        k3, prior, emb, (6, 2), num_layers=2, hidden=8, x_standardizer=ChannelStandardization().fit(xs)
+        k3,
+        prior,
+        emb,
+        (6, 2),
+        SplineFlowSettings(num_layers=2, hidden=8),
+        x_standardizer=ChannelStandardization().fit(xs),
     )
     # move off the initial near-identity weights so the test is not trivially satisfied
     flow = jax.tree.map(lambda a: a * 1.7 if eqx_is_float(a) else a, flow)

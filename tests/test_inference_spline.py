@@ -4,7 +4,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vdsbi.inference import BoxPrior, IdentityEmbedding
+from vdsbi.inference import BoxPrior, IdentityEmbedding, SplineFlowSettings
 from vdsbi.inference._flow import ConditionalFlow
 from vdsbi.inference._spline import num_spline_params, rq_spline_forward, rq_spline_inverse
 
@@ -60,7 +60,11 @@ def test_spline_vector_jacobian(x64):
 def _random_flow(key, dim=3, context=2):
     prior = BoxPrior(-2.0 * jnp.ones(dim), 3.0 * jnp.ones(dim))
     flow = ConditionalFlow(
-        key, prior, IdentityEmbedding(context), (context,), num_layers=3, num_bins=5, hidden=16
+        key,
+        prior,
+        IdentityEmbedding(context),
+        (context,),
+        SplineFlowSettings(num_layers=3, num_bins=5, hidden=16),
     )
     # Perturb every float leaf so the flow is far from the identity.
     leaves, tree = jax.tree.flatten(flow)

@@ -7,6 +7,7 @@ import scipy.stats
 from benchmarks.tasks import TASKS, get_task, slcp_log_likelihood
 from vdsbi.diagnostics import c2st
 from vdsbi.inference import IdentityEmbedding, NPEConfig, TrainingSettings, apt
+from vdsbi.inference._config import WeightAveraging
 
 
 @pytest.mark.parametrize("name", sorted(TASKS))
@@ -96,7 +97,7 @@ def test_two_moons_apt_reaches_c2st_below_078():
     # wherever the SGD noise leaves them, which on another CPU can fail the test; the one-epoch
     # weight average makes the score robust to that, so the test trains with it.
     training = TrainingSettings(
-        batch_size=128, learning_rate=1e-3, max_epochs=40, patience=10, average_epochs=1.0
+        batch_size=128, learning_rate=1e-3, max_epochs=40, patience=10, averaging=WeightAveraging(epochs=1.0)
     )
     cfg = NPEConfig(training=training)
     post, state = apt(

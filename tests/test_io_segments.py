@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vdsbi.io import build_recording, estimate_noise_std, find_segments, read_recording
+from vdsbi.io import SegmentRules, build_recording, estimate_noise_std, find_segments, read_recording
 from vdsbi.io._segments import usable_segments
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "real"  # beside the checkout, where present
@@ -42,7 +42,7 @@ def test_segments_cover_the_drive_with_reasons():
 
 def test_segments_split_and_min_duration():
     whole = usable_segments(drive())
-    pieces = usable_segments(drive(), max_duration=5.0)
+    pieces = usable_segments(drive(), rules=SegmentRules(max_duration=5.0))
     span = whole[0][1] - whole[0][0]
     assert len(pieces) == int(np.ceil(span / 5.0)) > 1
     assert pieces[0][0] == whole[0][0] and pieces[-1][1] == pytest.approx(whole[0][1])

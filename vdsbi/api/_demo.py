@@ -11,8 +11,9 @@ import os
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from ..io import output_dir
+from ..io import Recording, output_dir
 from ..problem import parameter_name
 from ..runtime import in_background
 from ._commands import measured_priors
@@ -23,6 +24,9 @@ from ._options import Budget, IdentifyOptions, ModelOptions, Progress
 from ._pages import demo_page
 from .outputs import plot_posterior
 from .plots import before_after_plot
+
+if TYPE_CHECKING:
+    from ..simulator import Vehicle
 
 #: The effect hidden in the demo recording (identify's model does not know it).
 CONCEALED = {"sensor_bias": {"ax": 0.3, "ay": -0.25, "yaw_rate": 0.0}}
@@ -158,11 +162,11 @@ def demo(
     name = Path(out or time.strftime("vdsbi-demo-%Y%m%d-%H%M%S"))
     say = log or (lambda s: None)
     b = budget or (QUICK if quick else DemoBudget())
-    run = functools.partial(_identify, budget=b, seed=seed, progress=progress, say=say)
     with output_dir(name) as d:
         say(f"1/5 simulating a {b.duration:g} s drive of the built-in vehicle with a concealed effect")
         truth = demo_recording(d, duration=b.duration, seed=seed)
         rec, veh = _drive(d, name)
+        run = functools.partial(_identify, _DemoRun(rec, veh, d, name, b, seed, progress, say))
         if run_diagnosis:
             # The diagnosis does not use the first identification, so it runs alongside it on
             # another thread: each spends much of its time compiling on one core.
@@ -172,7 +176,7 @@ def demo(
             )
         say(f"2/5 identify with the base model: {b.base_rounds} round(s) x {b.sims} simulations")
         # Flagged anyway: no point spending more rounds on it.
-        base = run(rec, veh, d, name, "identify", (), rounds=b.base_rounds)
+        base = run("identify", (), rounds=b.base_rounds)
         runs, diagnosis, report = [("base model", "identify", base)], "skipped (--no-diagnose)", None
         if run_diagnosis:
             say("3/5 diagnose: looking for missing physics (run alongside step 2)")
@@ -183,7 +187,7 @@ def demo(
             if report["identify_command"]:
                 say(f"4/5 identify again, as diagnose says: {report['identify_command']}")
                 folder = "identify-" + "-".join(report["chosen"])
-                refined = run(rec, veh, d, name, folder, report["chosen"], priors=_measured(report))
+                refined = run(folder, report["chosen"], priors=_measured(report))
                 runs.append((f"with {', '.join(report['chosen'])}", folder, refined))
         say("5/5 the before/after page")
         _before_after(d, truth, runs, report)
@@ -205,29 +209,45 @@ def _diagnose(rec, veh, d: Path, name: Path, *, seed: int, options: dict, log) -
     return res.report
 
 
-def _identify(rec, veh, d: Path, name: Path, folder: str, effects, *, budget, seed, progress, say, **kw):
+@dataclasses.dataclass(frozen=True)
+class _DemoRun:
+    """What the demo's identifications share: the drive, the working folder ``d`` and the
+    folder's name as the user gave it, the budget, the seed and where progress goes."""
+
+    rec: Recording
+    veh: Vehicle
+    d: Path
+    name: Path
+    budget: DemoBudget
+    seed: int
+    progress: bool
+    say: Callable[[str], None]
+
+
+def _identify(run: _DemoRun, folder: str, effects, *, rounds: int | None = None, priors=None):
     """One identification of the demo drive into d/folder with identify's default effects and
-    `effects` added (as the command diagnose prints), its table in table.txt. `kw`: `rounds`
-    (default: the budget's) and `priors`."""
+    `effects` added (as the command diagnose prints), its table in table.txt; ``rounds``
+    defaults to the budget's."""
     from ..inference import StatisticsMLP
 
+    rec, veh, d, name, budget, say = run.rec, run.veh, run.d, run.name, run.budget, run.say
     options = IdentifyOptions(
-        model=ModelOptions(add_effects=tuple(effects), priors=kw.get("priors") or {}),
+        model=ModelOptions(add_effects=tuple(effects), priors=priors or {}),
         budget=Budget(
-            rounds=kw.get("rounds", budget.rounds),
+            rounds=budget.rounds if rounds is None else rounds,
             sims=budget.sims,
             epochs=budget.epochs,
             embedding=StatisticsMLP(),
             ppc_draws=budget.ppc_draws,
         ),
-        seed=seed,
+        seed=run.seed,
     )
     res = identify(
         rec,
         veh,
         options,
         out_dir=d / folder,
-        progress=Progress(say=say, bars=progress),
+        progress=Progress(say=say, bars=run.progress),
         names=_names(name, folder),
     )
     (d / folder / "table.txt").write_text(res.table() + "\n")

@@ -129,7 +129,7 @@ def design(
         res = _optimise(problem, start, steps, learning_rate, log or (lambda s: None))
         designed, v0 = res.maneuver.inputs(limits), float(res.maneuver.initial_speed(limits))
         fisher = dict(channels=channels, noise=sensor)
-        bounds = _bounds(model, th, limits, start, res.maneuver, designed, v0, fisher, target, noise)
+        bounds = _bounds(model, th, limits, (start, res.maneuver), fisher, target, noise)
         rec = _recording(model, th, designed, v0)
         described = res.maneuver.describe(limits)
     return DesignReport(bounds, _info(target, described, limits, steps, res), rec)
@@ -157,13 +157,14 @@ def _problem(model, theta, limits, target: str, channels, noise):
     )
 
 
-def _bounds(
-    model, theta, limits, start, maneuver, designed, v0: float, fisher: dict, target: str, noise: str
-) -> dict:
-    """bounds.json (`noise`: the noise model's name): the Fisher reports of `_reports`, the
-    improvement per parameter (CRB std before / after) and the designed maneuver's limits check."""
+def _bounds(model, theta, limits, maneuvers: tuple, fisher: dict, target: str, noise: NoiseName) -> dict:
+    """bounds.json (`noise`: the noise model's name): the Fisher reports of `_reports` for
+    ``maneuvers = (start, designed)``, the improvement per parameter (CRB std before / after)
+    and the designed maneuver's limits check."""
     from ..diagnostics import check_limits
 
+    start, maneuver = maneuvers
+    designed, v0 = maneuver.inputs(limits), float(maneuver.initial_speed(limits))
     bounds = {"target": target, "noise": noise, "channels": fisher["channels"]}
     bounds |= _reports(model, theta, limits, start, maneuver, fisher)
     before, after = bounds["before"]["crb_std"], bounds["after"]["crb_std"]

@@ -98,7 +98,9 @@ def observability(
     channels, dropped = noise_channels(channels, sensor, source)
     th = checked_theta(theta, veh)
     model, params = _model(veh, effects, effect_params, mode)
-    rep = _report(model, th, inputs, v0, params, channels, sensor, veh, problem)
+    rep = _report(model, th, inputs, v0, params, channels, sensor)
+    if problem is not None:
+        rep |= _identifiability(problem, th, veh)
     rep["maneuver"] = label or (rec.source if rec is not None else "inputs")
     rep["v0"] = v0
     rep["noise"] = noise
@@ -133,11 +135,11 @@ def _default_v0(rec: Recording | None, vehicle: Vehicle) -> float:
     return first_speed(rec, vehicle) if rec is not None else PROFILE_V0
 
 
-def _report(model, theta, inputs, v0, params, channels, noise, vehicle: Vehicle, problem) -> dict:
-    """`fisher_report` of the maneuver in float64, with a recording's identifiability."""
+def _report(model, theta, inputs, v0, params, channels, noise) -> dict:
+    """`fisher_report` of the maneuver in float64."""
     import jax
 
-    from ..diagnostics import fisher_report, identifiability, model_fisher
+    from ..diagnostics import fisher_report, model_fisher
 
     with jax.enable_x64(True):
         import jax.numpy as jnp
@@ -151,12 +153,21 @@ def _report(model, theta, inputs, v0, params, channels, noise, vehicle: Vehicle,
             channels=channels,
             noise=noise,
         )
-        rep = fisher_report(fisher)
-        if problem is not None:
-            # Over the whole drive as identify sees it (windows, shared filter, noise model).
-            rep["identifiability"] = identifiability(problem, theta, vehicle.default_prior())
-            rep["longitudinal"] = problem.longitudinal
-    return rep
+        return fisher_report(fisher)
+
+
+def _identifiability(problem, theta, vehicle: Vehicle) -> dict:
+    """A recording's identifiability over the whole drive as identify sees it (windows, shared
+    filter, noise model), in float64."""
+    import jax
+
+    from ..diagnostics import identifiability
+
+    with jax.enable_x64(True):
+        return {
+            "identifiability": identifiability(problem, theta, vehicle.default_prior()),
+            "longitudinal": problem.longitudinal,
+        }
 
 
 def _model(

@@ -20,7 +20,7 @@ from ..io import (
     write_text_atomically as write_text_atomically,
 )
 from ..simulator import PARAM_NAMES, PARAM_UNITS
-from ._export import EXPORT_FORMATS as EXPORT_FORMATS, FILE_NAMES, export
+from ._export import EXPORT_FORMATS as EXPORT_FORMATS, FILE_NAMES, ExportFormat, export
 from ._pages import identify_page
 from .plots import pairplot, ppc_plot
 
@@ -119,7 +119,9 @@ def _uninformed(p: Mapping[str, Any]) -> bool:
     return p["std_ratio_to_prior"] > MAX_STD_RATIO
 
 
-def write_export(run_dir: str | os.PathLike, fmt: str, out: str | os.PathLike | None = None, **kw) -> Path:
+def write_export(
+    run_dir: str | os.PathLike, fmt: ExportFormat, out: str | os.PathLike | None = None, **kw
+) -> Path:
     """`export` written to `out` (default: `run_dir`/FILE_NAMES[fmt]); the path written."""
     text = export(run_dir, fmt, **kw)
     path = Path(out) if out is not None else Path(run_dir) / FILE_NAMES[fmt]

@@ -25,6 +25,7 @@ from ._identifiability import (
 from ._maneuver import Limits as Limits, Maneuver as Maneuver
 from ._misspecification import (
     Localisation as Localisation,
+    LocaliseSettings as LocaliseSettings,
     MisspecificationTest as MisspecificationTest,
     locate_mismatch as locate_mismatch,
     misspecification_test as misspecification_test,

@@ -14,6 +14,7 @@ epoch-mean TRAINING loss (stop after 10 consecutive epochs without an improvemen
 The five folds are trained simultaneously with ``vmap`` inside one ``lax.while_loop``.
 """
 
+import dataclasses
 import functools
 
 import jax
@@ -44,11 +45,30 @@ def _logits(params, x):
     return (x @ w + b)[..., 0]
 
 
-@functools.partial(jax.jit, static_argnames=("hidden", "batch_size", "max_epochs", "patience"))
-def _fit_predict(
-    key, x_tr, y_tr, x_te, y_te, *, hidden, batch_size, max_epochs, patience, lr=1e-3, alpha=1e-4, tol=1e-4
-):
+@dataclasses.dataclass(frozen=True)
+class _Classifier:
+    """The C2ST classifier and its training (sklearn's MLPClassifier as sbibm sets it up)."""
+
+    hidden: int
+    batch_size: int
+    max_epochs: int
+    patience: int
+    lr: float = 1e-3
+    alpha: float = 1e-4
+    tol: float = 1e-4
+
+
+@functools.partial(jax.jit, static_argnames=("classifier",))
+def _fit_predict(key, x_tr, y_tr, x_te, y_te, *, classifier: _Classifier):
     """Train on one fold (one example = one fold; vmapped outside); return held-out accuracy."""
+    hidden, batch_size, lr, alpha, tol = (
+        classifier.hidden,
+        classifier.batch_size,
+        classifier.lr,
+        classifier.alpha,
+        classifier.tol,
+    )
+    max_epochs, patience = classifier.max_epochs, classifier.patience
     n, d = x_tr.shape
     nb = n // batch_size
     opt = optax.adam(lr, b1=0.9, b2=0.999, eps=1e-8)
@@ -131,10 +151,12 @@ def c2st(
     acc = jax.vmap(
         functools.partial(
             _fit_predict,
-            hidden=10 * d,
-            batch_size=min(batch_size, tr.shape[1]),
-            max_epochs=max_epochs,
-            patience=patience,
+            classifier=_Classifier(
+                hidden=10 * d,
+                batch_size=min(batch_size, tr.shape[1]),
+                max_epochs=max_epochs,
+                patience=patience,
+            ),
         )
     )(jax.random.split(k_fit, n_folds), data[tr], target[tr], data[te], target[te])
     return float(jnp.mean(acc))

@@ -24,7 +24,7 @@ from ..simulator import CHANNELS, NOMINAL_THETA, PARAM_NAMES, SEED_CHANNELS, Inp
 from ..simulator.measurement import SensorNoise
 from ..simulator.models import AbstractVehicleModel
 from ..simulator.solvers import RK4, AbstractSolver
-from ._fisher import channel_noise, scaled_fisher
+from ._fisher import MeasuredNoise, channel_noise, scaled_fisher
 from ._maneuver import Limits, Maneuver
 
 _AY = CHANNELS.index("ay")
@@ -84,10 +84,7 @@ class DesignProblem(eqx.Module):
             self.scale,
             inputs,
             v0,
-            jnp.asarray(self.channels),
-            self.relative,
-            self.additive,
-            self.floor_fraction,
+            MeasuredNoise(jnp.asarray(self.channels), self.relative, self.additive, self.floor_fraction),
             self.solver,
         )
         return f.fim, f.readings, f.ok

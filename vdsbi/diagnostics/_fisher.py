@@ -256,10 +256,7 @@ def model_fisher(
         scale,
         inputs,
         jnp.asarray(v0, dtype=float),
-        idx,
-        jnp.asarray(rel),
-        jnp.asarray(add),
-        floor_fraction,
+        MeasuredNoise(idx, jnp.asarray(rel), jnp.asarray(add), floor_fraction),
         solver,
     )
     return Fisher(
@@ -303,16 +300,28 @@ class ScaledFisher(NamedTuple):
     jac: Float[Array, "T C P"]
 
 
+class MeasuredNoise(eqx.Module):
+    """The measured channels and their noise model (see `noise_std`).
+
+    Attributes:
+        idx: indices of the measured channels in CHANNELS.
+        relative, additive: noise std per measured channel.
+        floor_fraction: relative-noise floor.
+    """
+
+    idx: Int[Array, " C"]
+    relative: Float[Array, " C"]
+    additive: Float[Array, " C"]
+    floor_fraction: float = eqx.field(static=True, default=FLOOR_FRACTION)
+
+
 def scaled_fisher(
     model: AbstractVehicleModel,
     z: Float[Array, " P"],
     scale: Float[Array, " P"],
     inputs: Inputs,
     v0: Float[Array, ""],
-    idx: Int[Array, " C"],
-    relative: Float[Array, " C"],
-    additive: Float[Array, " C"],
-    floor_fraction: float = FLOOR_FRACTION,
+    noise: MeasuredNoise,
     solver: AbstractSolver = RK4(),
 ) -> ScaledFisher:
     """F of the flat parameters (θ, then the model's effects') in scaled units, from one
@@ -325,11 +334,10 @@ def scaled_fisher(
         scale: (P,) scaling, physical units.
         inputs: the maneuver.
         v0: initial speed, m/s.
-        idx: indices of the measured channels in CHANNELS.
-        relative, additive: noise model per measured channel (see `noise_std`).
-        floor_fraction: relative-noise floor.
+        noise: the measured channels and their noise.
         solver: integration settings.
     """
+    idx = noise.idx
 
     def run(z_):
         theta, eps = _split(model, z_ * scale)
@@ -337,11 +345,11 @@ def scaled_fisher(
         return ys[:, idx], (ys, ok)
 
     jac, (ys, ok) = jax.jacfwd(run, has_aux=True)(z)
-    std = noise_std(ys[:, idx], relative, additive, floor_fraction)
+    std = noise_std(ys[:, idx], noise.relative, noise.additive, noise.floor_fraction)
     return ScaledFisher(fisher_from_jacobian(jac, std), ys, ok, std, jac)
 
 
 @eqx.filter_jit
-def _model_fisher_scaled(model, z, scale, inputs, v0, idx, rel, add, floor_fraction, solver):
-    f = scaled_fisher(model, z, scale, inputs, v0, idx, rel, add, floor_fraction, solver)
-    return f.fim, f.readings[:, idx], f.std, f.jac
+def _model_fisher_scaled(model, z, scale, inputs, v0, noise: MeasuredNoise, solver):
+    f = scaled_fisher(model, z, scale, inputs, v0, noise, solver)
+    return f.fim, f.readings[:, noise.idx], f.std, f.jac

@@ -199,6 +199,30 @@ def _merge(intervals, gap):
     return out
 
 
+@dataclasses.dataclass(frozen=True)
+class LocaliseSettings:
+    """How `locate_mismatch` cuts and tests the residuals.
+
+    Attributes:
+        window: time-window length, s.
+        smooth: moving-average length, s, applied before the window statistic (low-pass:
+            the window excess then measures slow structure, not noise).
+        max_lag: largest cross-correlation lag, s.
+        alpha: per-cell significance level (Bonferroni-corrected over cells).
+    """
+
+    window: float = 2.0
+    smooth: float = 0.25
+    max_lag: float = 1.0
+    alpha: float = 0.01
+
+    def __post_init__(self):
+        if not (self.window > 0 and self.smooth >= 0 and self.max_lag >= 0):
+            raise ValueError(f"window > 0, smooth >= 0 and max_lag >= 0 wanted, got {self}")
+        if not 0 < self.alpha < 1:
+            raise ValueError(f"alpha must be in (0, 1), got {self.alpha}")
+
+
 def locate_mismatch(
     test: MisspecificationTest,
     residuals: np.ndarray,
@@ -207,10 +231,7 @@ def locate_mismatch(
     *,
     rate: float,
     input_names: Sequence[str] = ("steer", "torque_front", "torque_rear"),
-    window: float = 2.0,
-    smooth: float = 0.25,
-    max_lag: float = 1.0,
-    alpha: float = 0.01,
+    settings: LocaliseSettings = LocaliseSettings(),
 ) -> Localisation:
     """Per channel, time window and frequency band: how far the residual departs from noise.
 
@@ -220,15 +241,13 @@ def locate_mismatch(
         times: (W, L) time stamps, s.
         inputs: (W, L, I) driver inputs on the same samples.
         rate: Hz.
-        window: time-window length, s.
-        smooth: moving-average length, s, applied before the window statistic (low-pass:
-            the window excess then measures slow structure, not noise).
-        max_lag: largest cross-correlation lag, s.
-        alpha: per-cell significance level (Bonferroni-corrected over cells).
+        input_names: names of the inputs' channels.
+        settings: the windows, smoothing, lags and significance level.
 
     Returns:
         `Localisation`.
     """
+    window, smooth, max_lag, alpha = settings.window, settings.smooth, settings.max_lag, settings.alpha
     res = np.asarray(residuals, dtype=float)
     names = test.channels
     chans, bands = _significant_cells(test, alpha)

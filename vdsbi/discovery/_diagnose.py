@@ -57,7 +57,7 @@ from ._report import Findings, build_report, write_report
 from ._results import DiagnosisResult, DiscoveryFit, Ranked, Verdict
 from ._search import Step, forward_search
 from ._settings import DiagnoseSettings, Progress
-from ._terms import discover_terms, terms_section
+from ._terms import HeldOutScores, discover_terms, terms_section
 
 
 def typical_theta(vehicle: Vehicle) -> np.ndarray:
@@ -305,10 +305,13 @@ def _describe_remainder(fitter: Fitter, base, decision, after, held_ok, s, say):
     return found, _check(found.fit, fitter.problem, s.seed + 2, s).test
 
 
-def _conclude(before, decision, base, after, held, terms, test_terms, windows: Problem, s):
+def _conclude(checks: tuple, decision, base, held, remainder: tuple, windows: Problem, s):
     """The verdict, the report's section on the discovered terms (`terms_section`), and the
     held-out scores the report shows (those with the terms only where the section uses them).
-    The verdict names the changes to the base set: the effects added, then any removed."""
+    ``checks``: the residual checks of the base fit and of the chosen effects'; ``remainder``: the
+    term discovery and its test (`_describe_remainder`). The verdict names the changes to the
+    base set: the effects added, then any removed."""
+    (before, after), (terms, test_terms) = checks, remainder
     p_before, p_after = float(before.test.p_value), float(after.test.p_value)
     named = tuple(e for e in decision.chosen if e not in base.effects)
     dropped = tuple(e for e in base.effects if e not in decision.chosen)
@@ -323,11 +326,8 @@ def _conclude(before, decision, base, after, held, terms, test_terms, windows: P
         chosen=changed,
         terms=terms,
         p_terms=None if test_terms is None else float(test_terms.p_value),
-        held_after=held["after"],
-        held_terms=held.get("after_terms"),
-        n_held=int(windows.held.sum()),
+        held=HeldOutScores(held["after"], held.get("after_terms"), int(windows.held.sum()), tau),
         alpha=s.alpha,
-        tau=tau,
     )
     text = concl["text"] + (f"; {section['sentence']}" if section.get("sentence") else "")
     found = Verdict(detected, named, concl["explained"], improved, section["explanation"], text, dropped)
@@ -440,7 +440,9 @@ def _find(
         extra = _held_out(terms.fitter, windows, {"after_terms": terms.fit}, block)
         for into, part in zip((predictions, variances, held), extra):
             into.update(part)
-    conclusion, section, shown = _conclude(before, decision, base, after, held, terms, test_terms, windows, s)
+    conclusion, section, shown = _conclude(
+        (before, after), decision, base, held, (terms, test_terms), windows, s
+    )
     return Findings(
         base=base,
         final=decision.final,

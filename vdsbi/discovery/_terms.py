@@ -18,6 +18,7 @@ through the differentiable simulator:
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 
 import equinox as eqx
@@ -191,6 +192,23 @@ def _drop_stand_ins(fitter: Fitter, fit: DiscoveryFit, chosen, max_iter: int):
     return fit, dropped
 
 
+@dataclasses.dataclass(frozen=True)
+class HeldOutScores:
+    """The held-out part's scores per channel that `terms_section` weighs.
+
+    Attributes:
+        after: scores after the library fix ({channel: {"chi2_dof": …}}).
+        terms: scores with the discovered terms (None: no refit with terms).
+        n: held-out samples per channel.
+        tau: each channel's residual autocorrelation time (default 1: white).
+    """
+
+    after: dict
+    terms: dict | None
+    n: int
+    tau: Mapping[str, float] | None = None
+
+
 def terms_section(
     *,
     p_before: float,
@@ -198,11 +216,8 @@ def terms_section(
     chosen: Sequence[str],
     terms: TermDiscovery | None,
     p_terms: float | None,
-    held_after: dict,
-    held_terms: dict | None,
-    n_held: int,
+    held: HeldOutScores,
     alpha: float,
-    tau: Mapping[str, float] | None = None,
 ) -> dict:
     """The discovered terms, their held-out fit and test, and what explained the mismatch:
     "discovered term" (kept terms that also predict the held-out part better: held-out
@@ -212,9 +227,8 @@ def terms_section(
     channel), "unexplained", or "none" (no mismatch).
 
     `p_before`, `p_after`, `p_terms`: the residual tests of the base fit, the chosen effects'
-    fit and the refit with the terms; `held_after`, `held_terms` the held-out scores per
-    channel after the library fix and with the terms; `n_held` held-out samples per channel;
-    `tau` each channel's residual autocorrelation time (default 1: white)."""
+    fit and the refit with the terms; `held` the held-out scores (`HeldOutScores`)."""
+    held_after, held_terms, n_held, tau = held.after, held.terms, held.n, held.tau
     detected = bool(p_before < alpha)
     worst = worst_channel(held_after)
     held_ok = worst[1] <= claim_limit(worst[2])

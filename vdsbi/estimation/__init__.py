@@ -4,6 +4,8 @@ start speeds and their marginalisation, and the Laplace covariance with its wide
 diagnose and the experiments all fit with it."""
 
 from ._least_squares import (
+    GaussianPrior as GaussianPrior,
+    StepControl as StepControl,
     laplace_covariance as laplace_covariance,
     levenberg_marquardt as levenberg_marquardt,
 )

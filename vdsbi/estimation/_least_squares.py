@@ -29,6 +29,7 @@ rejected step for one residual evaluation and compiles once for every candidate 
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -59,6 +60,41 @@ class LeastSquaresResult(eqx.Module):
     converged: Bool[Array, ""]
 
 
+class GaussianPrior(eqx.Module):
+    """The Gaussian prior ½Σ precision·(z − mean)² added to the cost.
+
+    Attributes:
+        precision: (P,) prior precision per coordinate.
+        mean: (P,) its mean.
+    """
+
+    precision: Float[ArrayLike, " P"]
+    mean: Float[ArrayLike, " P"]
+
+
+@dataclasses.dataclass(frozen=True)
+class StepControl:
+    """How Levenberg–Marquardt damps and bounds its steps (see the module docstring).
+
+    Attributes:
+        damping: initial λ.
+        max_step: bound on each coordinate of a step.
+        max_tries: damping increases tried per iteration before giving up.
+    """
+
+    damping: float = 1e-3
+    max_step: float = np.inf
+    max_tries: int = 8
+
+    def __post_init__(self):
+        if not self.damping > 0:
+            raise ValueError(f"StepControl.damping must be > 0, got {self.damping}")
+        if not self.max_step > 0:
+            raise ValueError(f"StepControl.max_step must be > 0, got {self.max_step}")
+        if self.max_tries < 1:
+            raise ValueError(f"StepControl.max_tries must be >= 1, got {self.max_tries}")
+
+
 class _State(NamedTuple):
     z: Array
     r: Array
@@ -82,28 +118,22 @@ def levenberg_marquardt(
     fn: Callable[[Float[Array, " P"]], Float[Array, " N"]],
     z0: Float[Array, " P"],
     *,
-    prior_precision: Float[ArrayLike, " P"] | None = None,
-    prior_mean: Float[ArrayLike, " P"] | None = None,
+    prior: GaussianPrior | None = None,
     max_steps: int | Int[Array, ""] = 30,
     rtol: float | Float[Array, ""] = 1e-6,
-    damping: float = 1e-3,
-    max_step: float = np.inf,
-    max_tries: int = 8,
+    control: StepControl = StepControl(),
     jacobian: Callable[[Float[Array, " P"]], tuple[Float[Array, " N"], Float[Array, "N P"]]] | None = None,
 ) -> LeastSquaresResult:
-    """Minimise ½|fn(z)|² + ½Σ prior_precision·(z − prior_mean)² (see the module docstring).
+    """Minimise ½|fn(z)|² + ½Σ precision·(z − mean)² of ``prior`` (see the module docstring).
 
     Args:
         fn: whitened residual of one data set, (P,) -> (N,); a non-finite entry makes a
             trial point infinitely bad.
         z0: (P,) start.
-        prior_precision: (P,) Gaussian prior precision per coordinate (default 0: no prior).
-        prior_mean: (P,) its mean (default 0).
+        prior: the Gaussian prior (default: none).
         max_steps: iteration cap (may be traced: one compilation serves all caps).
         rtol: stop once a kept step lowers the cost by less than this fraction (0: never).
-        damping: initial λ.
-        max_step: bound on each coordinate of a step.
-        max_tries: damping increases tried per iteration before giving up.
+        control: the damping and the bounds on the steps.
         jacobian: z -> (fn(z), ∂fn/∂z), for a residual whose Jacobian has a structure cheaper to
             evaluate than P forward tangents (default: `jax.jacfwd` of `fn`).
     """
@@ -112,8 +142,8 @@ def levenberg_marquardt(
     # One jitted residual: its shape, the trials and the Jacobian then share one trace of it
     # (for a simulation, tracing is a large part of compiling the fit).
     fn = jax.jit(fn)
-    prec = jnp.zeros_like(z0) if prior_precision is None else jnp.asarray(prior_precision, dtype)
-    mean = jnp.zeros_like(z0) if prior_mean is None else jnp.asarray(prior_mean, dtype)
+    prec = jnp.zeros_like(z0) if prior is None else jnp.asarray(prior.precision, dtype)
+    mean = jnp.zeros_like(z0) if prior is None else jnp.asarray(prior.mean, dtype)
     both = (lambda z: _residual_and_jacobian(fn, z)) if jacobian is None else jacobian
     # The start is evaluated and linearised by the loop's own first trial (a step of zero), so
     # the compiled program holds the residual's Jacobian once.
@@ -123,11 +153,11 @@ def levenberg_marquardt(
         r=jnp.zeros(r_shape.shape, r_shape.dtype),
         jac=jnp.zeros((*r_shape.shape, *z0.shape), r_shape.dtype),
         cost=jnp.asarray(jnp.inf, dtype),
-        lam=jnp.asarray(damping, dtype),
+        lam=jnp.asarray(control.damping, dtype),
         steps=jnp.asarray(-1),
         done=jnp.asarray(False),
     )
-    iteration = lambda s: _iteration(fn, both, s, prec, mean, rtol, max_step, max_tries)
+    iteration = lambda s: _iteration(fn, both, s, prec, mean, rtol, control.max_step, control.max_tries)
     s = jax.lax.while_loop(lambda s: ~s.done & (s.steps < max_steps), iteration, init)
     return LeastSquaresResult(
         z=s.z, residual=s.r, jacobian=s.jac, cost=s.cost, num_steps=s.steps, converged=s.done

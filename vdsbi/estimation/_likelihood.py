@@ -35,7 +35,7 @@ from ..problem import Box, Part, Problem, parameter_names, simulate_draws, split
 from ..simulator import PARAM_NAMES
 from ..simulator.models import AbstractVehicleModel
 from ..simulator.solvers import Solver
-from ._least_squares import laplace_covariance, levenberg_marquardt
+from ._least_squares import GaussianPrior, StepControl, laplace_covariance, levenberg_marquardt
 from ._noise import ModelError, NoiseModel, SensorNoise, measure_noise
 from ._start_speed import V0_STD, corrected_windows, own_columns, profiled, residual_and_jacobian
 from ._widening import BLOCK_TAUS, consistent_covariance, data_splits, robust_covariance
@@ -202,7 +202,7 @@ def fit_likelihood(
         size = sum(len(e.param_names) for e in effects)
         if len(box.names) != len(PARAM_NAMES) + size:
             raise ValueError(f"box over {len(box.names)} parameters, the model has {size} beside θ")
-        return _fit(problem, wm, effects, start, box, free, part, noise, max_steps, width)
+        return _fit(problem, wm, effects, start, box, _Request(free, part, noise, max_steps, width))
 
 
 def _first_noise(data: Problem, mask, noise: SensorNoise | ModelError) -> tuple[np.ndarray, np.ndarray, int]:
@@ -218,7 +218,25 @@ def _first_noise(data: Problem, mask, noise: SensorNoise | ModelError) -> tuple[
     return np.asarray(first.scale, float), np.asarray(first.tau, float), noise.passes
 
 
-def _fit(data: Problem, wm, effects, start, box, free, part, noise, max_steps, width):
+@dataclasses.dataclass(frozen=True)
+class _Request:
+    """What `fit_likelihood` was asked for beyond the model and the start (see its arguments)."""
+
+    free: Sequence[str] | None
+    part: Part
+    noise: SensorNoise | ModelError
+    max_steps: int
+    width: int | None
+
+
+def _fit(data: Problem, wm, effects, start, box, request: _Request):
+    free, part, noise, max_steps, width = (
+        request.free,
+        request.part,
+        request.noise,
+        request.max_steps,
+        request.width,
+    )
     names = box.names
     # Every window, the others masked: the validation fit and the refit on all the driving then
     # share one problem shape, and so one compilation.
@@ -431,10 +449,9 @@ def _lm(wm, y, mask, coords: _Coordinates, p, mean, std, max_steps):
     return levenberg_marquardt(
         fn,
         p,
-        prior_precision=prec.astype(p.dtype),
-        prior_mean=mean.astype(p.dtype),
+        prior=GaussianPrior(prec.astype(p.dtype), mean.astype(p.dtype)),
         max_steps=max_steps,
-        max_step=MAX_Z_STEP,
+        control=StepControl(max_step=MAX_Z_STEP),
         # Without start speeds to correct, the plain forward-mode Jacobian.
         jacobian=(lambda q: residual_and_jacobian(fn, k, q)) if p.shape[0] > k else None,
     )

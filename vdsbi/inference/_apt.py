@@ -4,7 +4,7 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -127,21 +127,19 @@ def _run_round(problem: _Problem, state: APTState, r: int, n: int) -> APTState:
     theta, x, sim_info = _simulate_kept(problem, k_sim, theta, n)
     info.update(sim_info)
     fraction = problem.config.training.validation_fraction
-    all_theta, all_x, round_ids, is_val = _append_round(state, theta, x, r, k_split, fraction)
+    data = _append_round(state, theta, x, r, k_split, fraction)
     previous = state.history[-1] if state.history else None
     config = problem.config
-    patience = _round_patience(config.training, config.sequential, round_ids, is_val, r, previous)
-    flow, fit_info = _train_round(
-        problem, state.flow, r, k_init, k_train, all_theta, all_x, round_ids, is_val, patience
-    )
+    patience = _round_patience(config.training, config.sequential, data.round_ids, data.is_val, r, previous)
+    flow, fit_info = _train_round(problem, state.flow, r, (k_init, k_train), data, patience)
     info.update(fit_info, train_s=time.perf_counter() - t0)
     return APTState(
         round=r + 1,
         key=k_next,
-        theta=all_theta,
-        x=all_x,
-        round_ids=round_ids,
-        is_val=is_val,
+        theta=data.theta,
+        x=data.x,
+        round_ids=data.round_ids,
+        is_val=data.is_val,
         flow=flow,
         history=(*state.history, info),
     )
@@ -156,7 +154,7 @@ def _propose(
     if problem.truncate:
         seq = problem.config.sequential
         theta, tinfo = truncated_prior(
-            key, flow, problem.prior, problem.x_o, n, seq.truncation_epsilon, seq.truncation_samples
+            key, flow, problem.prior, problem.x_o, n, seq.truncation.epsilon, seq.truncation.samples
         )
         return theta, {"proposal": "truncated_prior", **tinfo}
     k_draw, k_mass = jax.random.split(key)
@@ -192,15 +190,24 @@ def _simulate_kept(
     return theta[keep], x[keep], counts
 
 
+class _Data(NamedTuple):
+    """All kept simulations so far, each with its round and whether it is held out."""
+
+    theta: np.ndarray
+    x: np.ndarray
+    round_ids: np.ndarray
+    is_val: np.ndarray
+
+
 def _append_round(
     state: APTState, theta: np.ndarray, x: np.ndarray, r: int, key: PRNGKeyArray, fraction: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> _Data:
     """``state``'s data plus round ``r``'s kept draws, a ``fraction`` of them held out for validation."""
     m = theta.shape[0]
     n_val = max(1, int(round(fraction * m)))
     is_val_new = np.zeros(m, bool)
     is_val_new[np.asarray(jax.random.permutation(key, m))[:n_val]] = True
-    return (
+    return _Data(
         np.concatenate([state.theta, theta]),
         np.concatenate([state.x, x]),
         np.concatenate([state.round_ids, np.full(m, r, np.int32)]),
@@ -212,16 +219,15 @@ def _train_round(
     problem: _Problem,
     flow: AbstractEstimator | None,
     r: int,
-    k_init: PRNGKeyArray,
-    k_train: PRNGKeyArray,
-    theta: np.ndarray,
-    x: np.ndarray,
-    round_ids: np.ndarray,
-    is_val: np.ndarray,
+    keys: tuple[PRNGKeyArray, PRNGKeyArray],
+    data: _Data,
     patience: int,
 ) -> tuple[AbstractEstimator, dict[str, Any]]:
-    """Train the flow on all kept data (a new one from ``k_init`` in round 1)."""
+    """Train the flow on all kept data (``keys = (k_init, k_train)``; a new flow from
+    ``k_init`` in round 1)."""
     config, seq = problem.config, problem.config.sequential
+    k_init, k_train = keys
+    theta, x, round_ids, is_val = data
     fresh = flow is None
     if fresh:
         flow = build_flow(k_init, problem.prior, problem.embedding, theta[~is_val], x[~is_val], config.flow)
@@ -234,12 +240,7 @@ def _train_round(
     if r == 0 or problem.truncate:
         loss = first_round_loss(config.flow)
     else:
-        loss = AtomicLoss(
-            num_atoms=seq.num_atoms,
-            leak_weight=seq.leak_weight,
-            leak_rows=seq.leak_rows,
-            leak_at=np.asarray(problem.x_o) if seq.leak_at_observation else None,
-        )
+        loss = _atomic_loss(seq, problem.x_o)
     flow, finfo = fit(
         k_train,
         flow,
@@ -255,6 +256,19 @@ def _train_round(
     )
     info = {"loss": type(loss).__name__, "patience": patience, "cosine_decay": training.cosine_decay}
     return flow, {**finfo, **info, "max_epochs": training.max_epochs}
+
+
+def _atomic_loss(seq: SequentialSettings, x_o: Array) -> AtomicLoss:
+    """The atomic loss of ``seq``, with its `LeakPenalty` if any."""
+    leak = seq.leak
+    if leak is None:
+        return AtomicLoss(num_atoms=seq.num_atoms)
+    return AtomicLoss(
+        num_atoms=seq.num_atoms,
+        leak_weight=leak.weight,
+        leak_rows=leak.rows,
+        leak_at=np.asarray(x_o) if leak.at_observation else None,
+    )
 
 
 _MIN_PATIENCE = 2

@@ -75,6 +75,22 @@ class FlowMatchingSettings:
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
+class WeightAveraging:
+    """An exponential moving average of the weights over training steps; it damps the SGD noise
+    a short, early-stopped round leaves in the weights.
+
+    Attributes:
+        epochs: its time constant, in epochs (> 0); it starts from the untrained flow.
+    """
+
+    epochs: float
+
+    def __post_init__(self):
+        if not self.epochs > 0:
+            raise ValueError(f"WeightAveraging.epochs must be > 0, got {self.epochs}")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
 class TrainingSettings:
     """One round's training (`fit`; the optimiser is `make_optimizer`'s).
 
@@ -89,8 +105,8 @@ class TrainingSettings:
             noisy early stop, and counts as converged for ``patience_over_new_data``. Rounds
             that continue a trained flow keep the constant rate and early stopping (a cosine
             there would run every later round to its end).
-        average_epochs: 0 (default) or the time constant, in epochs, of an exponential moving
-            average of the weights that validation, early stopping and the returned flow use.
+        averaging: None (default) or a `WeightAveraging` of the weights that validation,
+            early stopping and the returned flow use.
         validation_fraction: fraction of each round's simulations held out for validation.
     """
 
@@ -101,14 +117,59 @@ class TrainingSettings:
     max_epochs: int = 1000
     patience: int = 20
     cosine_decay: bool = False
-    average_epochs: float = 0.0
+    averaging: WeightAveraging | None = None
     validation_fraction: float = 0.1
 
     def __post_init__(self):
         if not 0.0 < self.validation_fraction < 1.0:
             raise ValueError("validation_fraction must be in (0, 1)")
-        if self.average_epochs < 0:
-            raise ValueError(f"average_epochs must be >= 0, got {self.average_epochs}")
+        if self.averaging is not None and not isinstance(self.averaging, WeightAveraging):
+            raise TypeError(f"averaging must be a WeightAveraging or None, got {self.averaging!r}")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class LeakPenalty:
+    """A penalty on the flow's mass outside the box, added to the atomic loss. It matters only
+    for an `IdentityMap`, whose mass outside the box the atomic loss cannot see.
+
+    Attributes:
+        weight: weight of `leak_penalty` (one draw per example, the squared distance outside
+            the box in box widths); > 0.
+        rows: rows of each batch the penalty draws for (evenly strided; 0, the default: every
+            row). The draw costs about as much as the ten atoms' densities; a subset estimates
+            the same penalty.
+        at_observation: also penalise the mass outside the box at x_o itself (as many draws as
+            ``rows``; `AtomicLoss.leak_at`). False (default): the batch only.
+    """
+
+    weight: float
+    rows: int = 0
+    at_observation: bool = False
+
+    def __post_init__(self):
+        if not self.weight > 0:
+            raise ValueError(f"LeakPenalty.weight must be > 0, got {self.weight}")
+        if self.rows < 0:
+            raise ValueError(f"LeakPenalty.rows must be >= 0, got {self.rows}")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Truncation:
+    """TSNPE's region: the prior truncated to the posterior's highest-density region.
+
+    Attributes:
+        epsilon: posterior mass outside the region.
+        samples: posterior samples that locate its density threshold.
+    """
+
+    epsilon: float = 1e-4
+    samples: int = 10_000
+
+    def __post_init__(self):
+        if not 0.0 < self.epsilon < 1.0:
+            raise ValueError(f"Truncation.epsilon must be in (0, 1), got {self.epsilon}")
+        if self.samples < 1:
+            raise ValueError(f"Truncation.samples must be >= 1, got {self.samples}")
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -129,37 +190,23 @@ class SequentialSettings:
             (default): ``max_epochs``.
         num_atoms: atoms per example in the APT loss (rounds > 1); its cost is linear in it.
             Default: sbi's 10.
-        leak_weight: weight of `leak_penalty` (one draw per example, the squared distance
-            outside the box in box widths) added to the atomic loss; matters only for an
-            `IdentityMap`, whose mass outside the box the atomic loss cannot see. 0 (default):
-            off.
-        leak_rows: rows of each batch the penalty draws for (evenly strided; 0, the default:
-            every row). The draw costs about as much as the ten atoms' densities; a subset
-            estimates the same penalty.
-        leak_at_observation: also penalise the flow's mass outside the box at x_o itself (as
-            many draws as ``leak_rows``; `AtomicLoss.leak_at`). False (default): the batch only.
-        truncation_epsilon: mass outside the HPD region for ``truncate=True`` (TSNPE).
-        truncation_samples: posterior samples used to locate the HPD threshold.
+        leak: None (default) or a `LeakPenalty` added to the atomic loss.
+        truncation: TSNPE's region for ``truncate=True`` (`Truncation`).
     """
 
     patience_over_new_data: bool = True
     later_max_epochs: int | None = None
     num_atoms: int = 10
-    leak_weight: float = 0.0
-    leak_rows: int = 0
-    leak_at_observation: bool = False
-    truncation_epsilon: float = 1e-4
-    truncation_samples: int = 10_000
+    leak: LeakPenalty | None = None
+    truncation: Truncation = Truncation()
 
     def __post_init__(self):
         if self.later_max_epochs is not None and self.later_max_epochs < 1:
             raise ValueError(f"later_max_epochs must be >= 1 or None, got {self.later_max_epochs}")
-        if self.leak_weight < 0:
-            raise ValueError(f"leak_weight must be >= 0, got {self.leak_weight}")
-        if self.leak_rows < 0:
-            raise ValueError(f"leak_rows must be >= 0, got {self.leak_rows}")
-        if self.leak_at_observation and self.leak_weight == 0:
-            raise ValueError("leak_at_observation needs leak_weight > 0 (it adds to that penalty)")
+        if self.leak is not None and not isinstance(self.leak, LeakPenalty):
+            raise TypeError(f"leak must be a LeakPenalty or None, got {self.leak!r}")
+        if not isinstance(self.truncation, Truncation):
+            raise TypeError(f"truncation must be a Truncation, got {self.truncation!r}")
         if self.num_atoms < 2:
             raise ValueError("num_atoms must be >= 2")
 

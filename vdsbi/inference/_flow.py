@@ -10,6 +10,7 @@ density is zero outside the prior box and samples always lie inside it) or an `I
 Layers are stacked with ``eqx.filter_vmap`` and applied with ``lax.scan``.
 """
 
+import dataclasses
 import math
 from typing import Any
 
@@ -19,12 +20,13 @@ import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 from jaxtyping import Array, Bool, Float, PRNGKeyArray
 
+from ._config import SplineFlowSettings
 from ._embeddings import AbstractEmbedding
 from ._estimator import AbstractEstimator, skeleton_parts
 from ._prior import BoxPrior
 from ._spline import num_spline_params, rq_spline_forward, rq_spline_inverse
 from ._standardize import Standardizer
-from ._theta_map import AbstractThetaMap, LogitMap, theta_map_from_name
+from ._theta_map import AbstractThetaMap, theta_map_from_name
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -73,10 +75,12 @@ class _Layer(eqx.Module):
     bound: float = eqx.field(static=True)
     use_lu: bool = eqx.field(static=True)
 
-    def __init__(self, mask, context_dim, *, dim, num_bins, hidden, num_blocks, bound, use_lu, key):
+    def __init__(self, mask, context_dim, *, dim: int, architecture: SplineFlowSettings, key):
         self.mask = mask
-        self.dim, self.num_bins, self.bound, self.use_lu = dim, num_bins, bound, use_lu
-        out = dim * num_spline_params(num_bins)
+        self.dim, self.num_bins = dim, architecture.num_bins
+        self.bound, self.use_lu = architecture.tail_bound, architecture.use_lu
+        out = dim * num_spline_params(self.num_bins)
+        hidden, num_blocks = architecture.hidden, architecture.num_blocks
         self.conditioner = _ResidualNet(dim + context_dim, out, hidden, num_blocks, key=key)
         self.lower = jnp.zeros((dim, dim))
         self.upper = jnp.zeros((dim, dim))
@@ -163,10 +167,9 @@ class ConditionalFlow(AbstractEstimator):
         prior: a :class:`BoxPrior`; fixes ``dim`` and the box bijection.
         embedding: maps one standardised x to a context vector of length ``embedding.out_dim``.
         x_shape: shape of ONE observation.
-        num_layers, num_bins, hidden, num_blocks, tail_bound, use_lu: architecture.
+        architecture: the layers and the θ map (`SplineFlowSettings`; its ``x_standardize``,
+            how a standardisation is fitted, is not read here: ``x_standardizer`` is the fit).
         theta_standardizer: affine map in the unbounded (logit, or θ) space, shape ``(d,)``.
-        theta_map: `LogitMap` (box → R^d bijection) or `IdentityMap` (flow on θ itself; sbi's
-            choice: a thin curved posterior is not bent further by the logit).
         x_standardizer: applied to x before the embedding.
     """
 
@@ -191,39 +194,35 @@ class ConditionalFlow(AbstractEstimator):
         prior: BoxPrior,
         embedding: AbstractEmbedding,
         x_shape: tuple[int, ...],
+        architecture: SplineFlowSettings = SplineFlowSettings(),
         *,
-        num_layers: int = 5,
-        num_bins: int = 10,
-        hidden: int = 50,
-        num_blocks: int = 2,
-        tail_bound: float = 3.0,
-        use_lu: bool = True,
-        theta_map: AbstractThetaMap = LogitMap(),
         theta_standardizer: Standardizer | None = None,
         x_standardizer: Standardizer | None = None,
     ):
+        a = architecture
         self.dim = prior.dim
         self.x_shape = tuple(int(s) for s in x_shape)
-        self.num_layers, self.num_bins, self.hidden = int(num_layers), int(num_bins), int(hidden)
-        self.num_blocks, self.tail_bound, self.use_lu = int(num_blocks), float(tail_bound), bool(use_lu)
-        if not isinstance(theta_map, AbstractThetaMap):
-            raise TypeError(f"theta_map must be a LogitMap or an IdentityMap, got {theta_map!r}")
-        self.theta_map = theta_map
+        self.num_layers, self.num_bins, self.hidden = int(a.num_layers), int(a.num_bins), int(a.hidden)
+        self.num_blocks, self.tail_bound, self.use_lu = int(a.num_blocks), float(a.tail_bound), bool(a.use_lu)
+        self.theta_map = a.theta_map
         self.prior = prior
         self.embedding = embedding
         self.theta_standardizer = theta_standardizer or Standardizer.identity(self.dim)
         self.x_standardizer = x_standardizer or Standardizer.identity(self.x_shape[-1] if self.x_shape else 1)
-        kw = dict(
-            dim=self.dim,
+        # the architecture with the casts above (the layers' static fields compare equal)
+        cast = dataclasses.replace(
+            a,
             num_bins=self.num_bins,
             hidden=self.hidden,
             num_blocks=self.num_blocks,
-            bound=self.tail_bound,
+            tail_bound=self.tail_bound,
             use_lu=self.use_lu,
         )
         keys = jax.random.split(key, self.num_layers)
         masks = _masks(self.num_layers, self.dim)
-        self.layers = eqx.filter_vmap(lambda k, m: _Layer(m, embedding.out_dim, key=k, **kw))(keys, masks)
+        self.layers = eqx.filter_vmap(
+            lambda k, m: _Layer(m, embedding.out_dim, dim=self.dim, architecture=cast, key=k)
+        )(keys, masks)
 
     # ---- one example -------------------------------------------------------------------------
     def _to_noise(self, zs, context):
@@ -301,12 +300,14 @@ def flow_from_spec(spec: dict[str, Any]) -> ConditionalFlow:
         prior,
         embedding,
         x_shape,
-        num_layers=spec["num_layers"],
-        num_bins=spec["num_bins"],
-        hidden=spec["hidden"],
-        num_blocks=spec["num_blocks"],
-        tail_bound=spec["tail_bound"],
-        use_lu=spec["use_lu"],
-        theta_map=theta_map_from_name(spec.get("theta_map", "logit")),
+        SplineFlowSettings(
+            num_layers=spec["num_layers"],
+            num_bins=spec["num_bins"],
+            hidden=spec["hidden"],
+            num_blocks=spec["num_blocks"],
+            tail_bound=spec["tail_bound"],
+            use_lu=spec["use_lu"],
+            theta_map=theta_map_from_name(spec.get("theta_map", "logit")),
+        ),
         x_standardizer=xstd,
     )

@@ -60,7 +60,7 @@ def _warn_if_short(count, n) -> None:
             f"only {short} of {n} posterior draws fell inside the prior box in "
             f"{_MAX_REJECTION_ROUNDS} rounds of rejection (under 1 % of the flow's mass lies in "
             "the box); the rest repeat them. The estimator has leaked out of the box: consider "
-            "theta_map=LogitMap() or SequentialSettings.leak_weight > 0.",
+            "theta_map=LogitMap() or a SequentialSettings.leak penalty.",
             RuntimeWarning,
             stacklevel=2,
         )

@@ -3,6 +3,7 @@
 import functools
 import math
 from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -12,7 +13,7 @@ import optax
 from jaxtyping import PRNGKeyArray
 
 from ..runtime import in_background
-from ._config import TrainingSettings
+from ._config import TrainingSettings, WeightAveraging
 from ._estimator import AbstractEstimator
 from ._loss import AbstractLoss
 from ._sharding import data_mesh, replicate, stack_batches
@@ -200,10 +201,26 @@ def _validation_blocks(data, va: np.ndarray, vsz: int, block: int, mesh) -> list
     ]
 
 
-def _train_epoch(state, keys, data, tr: np.ndarray, bsz: int, block: int, mesh, loss, optimizer, decay):
-    """One pass over a random permutation of the training rows ``tr`` (``keys = (k_perm, k_steps)``),
-    in compiled blocks of ``block`` steps. ``state = (flow, opt_state, avg_flow or None)``; returns
-    the new state and the mean training loss."""
+class _Epochs(NamedTuple):
+    """What stays fixed over `fit`'s epochs: the data and its training rows ``tr``, the batch
+    size, the steps per compiled block, the mesh, the loss, the optimiser and the EMA decay
+    (None: no averaging)."""
+
+    data: tuple
+    tr: np.ndarray
+    bsz: int
+    block: int
+    mesh: Any
+    loss: AbstractLoss
+    optimizer: optax.GradientTransformation
+    decay: Any
+
+
+def _train_epoch(state, keys, epochs: _Epochs):
+    """One pass over a random permutation of the training rows (``keys = (k_perm, k_steps)``),
+    in compiled blocks. ``state = (flow, opt_state, avg_flow or None)``; returns the new state
+    and the mean training loss."""
+    data, tr, bsz, block, mesh, loss, optimizer, decay = epochs
     flow, opt_state, avg = state
     k_perm, k_steps = keys
     nb = tr.size // bsz
@@ -223,16 +240,14 @@ def _train_epoch(state, keys, data, tr: np.ndarray, bsz: int, block: int, mesh, 
     return (flow, opt_state, avg), float(total) / nb
 
 
-def _train_state(flow, optimizer, mesh, average_epochs: float, steps_per_epoch: int):
+def _train_state(flow, optimizer, mesh, averaging: WeightAveraging | None, steps_per_epoch: int):
     """``(flow, opt_state, avg_flow or None)`` replicated over ``mesh``, and the per-step EMA
-    decay whose time constant is ``average_epochs`` epochs (None when averaging is off)."""
-    if average_epochs < 0:
-        raise ValueError(f"average_epochs must be >= 0, got {average_epochs}")
+    decay of ``averaging`` (None when it is off)."""
     flow = replicate(flow, mesh)
     opt_state = replicate(init_opt_state(flow, optimizer), mesh)
-    if average_epochs == 0:
+    if averaging is None:
         return (flow, opt_state, None), None
-    decay = 1.0 - 1.0 / max(average_epochs * steps_per_epoch, 1.0)
+    decay = 1.0 - 1.0 / max(averaging.epochs * steps_per_epoch, 1.0)
     return (flow, opt_state, flow), replicate(jnp.asarray(decay), mesh)
 
 
@@ -307,27 +322,26 @@ def fit(
     masked no-op steps), so per-step Python dispatch is amortised and the loop is compiled once
     per loss and batch size, not once per data size. ``cosine_decay`` (see
     `cosine_learning_rate`) sets the learning rate per epoch over ``max_epochs``.
-    ``average_epochs`` > 0: validation, early stopping and the returned flow use an exponential
-    moving average of the weights with a time constant of that many epochs, started from
-    ``flow`` (it damps the SGD noise a short, early-stopped round leaves in the weights).
+    With ``averaging`` (`WeightAveraging`), validation, early stopping and the returned flow
+    use an exponential moving average of the weights, started from ``flow``.
     """
     optimizer = make_optimizer(training) if optimizer is None else optimizer
     mesh = data_mesh() if mesh is None else mesh
     tr, va = np.flatnonzero(~is_val), np.flatnonzero(is_val)
     bsz, vsz = _batch_sizes(tr.size, va.size, training.batch_size, mesh.devices.size)
-    state, decay = _train_state(flow, optimizer, mesh, training.average_epochs, tr.size // bsz)
+    state, decay = _train_state(flow, optimizer, mesh, training.averaging, tr.size // bsz)
     key, val_key = jax.random.split(key)
     data = (theta, x, prior_mask)
     val_batches = _validation_blocks(data, va, vsz, steps_per_call, mesh)
     # The validation loop compiles on a second thread while the first training block
     # compiles (XLA compiles without holding the GIL); its value, the initial loss, is unused.
     warm = in_background(eval_steps, state[0], val_batches[0][0], val_key, loss, val_batches[0][1])
-    epoch_args = (data, tr, bsz, steps_per_call, mesh, loss, optimizer, decay)  # fixed over epochs
+    epochs = _Epochs(data, tr, bsz, steps_per_call, mesh, loss, optimizer, decay)
     stopping = _EarlyStopping(state[0], training.patience)
     for epoch in range(training.max_epochs):
         key, k_perm, k_steps = jax.random.split(key, 3)
         state = _scheduled(state, training, epoch)
-        state, train_loss = _train_epoch(state, (k_perm, k_steps), *epoch_args)
+        state, train_loss = _train_epoch(state, (k_perm, k_steps), epochs)
         flow = state[0] if state[2] is None else state[2]
         warm.result()  # compiled (or raised) before the loop calls it: never compiled twice
         val_loss = _validation_loss(flow, val_batches, val_key, loss)

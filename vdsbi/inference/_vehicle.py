@@ -2,6 +2,7 @@
 
 import dataclasses
 from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -127,17 +128,18 @@ def identify(
         ys, ok = simulator(k, jnp.asarray(theta, jnp.float32))
         return obs(ys), ok
 
-    return fit_posterior(
-        key,
-        simulate,
-        prior,
-        x_o,
-        settings,
-        on_round_end=on_round_end,
-        on_epoch_end=on_epoch_end,
-        on_simulate=on_simulate,
-        state=state,
-    )
+    hooks = Hooks(on_round_end, on_epoch_end, on_simulate)
+    return fit_posterior(key, simulate, prior, x_o, settings, hooks=hooks, state=state)
+
+
+class Hooks(NamedTuple):
+    """Progress and checkpoint hooks: ``on_round_end(state)`` and
+    ``on_epoch_end(round, epoch, train_loss, val_loss)`` (see `apt`), and ``on_simulate(n)``
+    before each batch of ``n`` simulations."""
+
+    on_round_end: Callable[[APTState], None] | None = None
+    on_epoch_end: Callable | None = None
+    on_simulate: Callable[[int], None] | None = None
 
 
 def fit_posterior(
@@ -147,9 +149,7 @@ def fit_posterior(
     x_o,
     settings: IdentifySettings,
     *,
-    on_round_end: Callable[[APTState], None] | None = None,
-    on_epoch_end: Callable | None = None,
-    on_simulate: Callable[[int], None] | None = None,
+    hooks: Hooks = Hooks(),
     state: APTState | None = None,
 ) -> tuple[Posterior, np.ndarray, APTState]:
     """APT with `settings`' embedding and budget on `simulate(key, θ) -> (x, ok)` at `x_o`.
@@ -157,6 +157,7 @@ def fit_posterior(
     Raises:
         SimulationError: fewer than `MIN_USABLE_SIMULATIONS` usable simulations after a round.
     """
+    on_simulate = hooks.on_simulate
     usable = [0 if state is None else int(state.x.shape[0])]
 
     def guarded(k, theta):
@@ -181,8 +182,8 @@ def fit_posterior(
         sims_per_round=settings.sims_per_round,
         config=settings.config,
         truncate=settings.truncate,
-        on_round_end=on_round_end,
-        on_epoch_end=on_epoch_end,
+        on_round_end=hooks.on_round_end,
+        on_epoch_end=hooks.on_epoch_end,
         state=state,
     )
     samples = np.asarray(posterior.sample(k_s, settings.num_samples))

@@ -15,7 +15,7 @@ from ..simulator.solvers import Solver
 from ._apt_state import APTState
 from ._posterior import Posterior
 from ._prior import BoxPrior
-from ._vehicle import IdentifySettings, fit_posterior
+from ._vehicle import Hooks, IdentifySettings, fit_posterior
 
 
 def input_channels(problem: Problem) -> Float[Array, "W K I"]:
@@ -74,14 +74,5 @@ def identify_problem(
         ys, ok = simulate_draws(k, wm, th, sigma_raw=train.sigma_raw, v0_jitter=jitter, effect_params=ep)
         return to_x(flatten_windows(ys, mask).astype(jnp.float32)), ok
 
-    return fit_posterior(
-        key,
-        simulate,
-        prior,
-        x_o,
-        settings,
-        on_round_end=on_round_end,
-        on_epoch_end=on_epoch_end,
-        on_simulate=on_simulate,
-        state=state,
-    )
+    hooks = Hooks(on_round_end, on_epoch_end, on_simulate)
+    return fit_posterior(key, simulate, prior, x_o, settings, hooks=hooks, state=state)

@@ -15,6 +15,7 @@ from ._recording import Recording as Recording
 from ._resample import noise_gain as noise_gain, running_mean as running_mean
 from ._segments import (
     Segment as Segment,
+    SegmentRules as SegmentRules,
     estimate_noise_std as estimate_noise_std,
     find_segments as find_segments,
     label_runs as label_runs,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from typing import Literal
 
 import numpy as np
 
@@ -14,7 +15,7 @@ def write_bag(
     rec: Recording,
     path: str | os.PathLike,
     *,
-    storage: str = "sqlite3",
+    storage: Literal["sqlite3", "mcap"] = "sqlite3",
     start_ns: int = 1_700_000_000 * 10**9,
     skip: tuple[str, ...] = (),
 ) -> None:
@@ -31,6 +32,8 @@ def write_bag(
         storage: "sqlite3" or "mcap".
         skip: topics to leave out.
     """
+    if storage not in ("sqlite3", "mcap"):
+        raise ValueError(f"storage must be 'sqlite3' or 'mcap', got {storage!r}")
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     store = autoware_typestore()

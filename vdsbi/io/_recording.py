@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 
 from ..simulator import INPUTS
-from ..simulator.models import SpeedDriven, TorqueDriven, model_class
+from ..simulator.models import AbstractVehicleModel, LongitudinalMode, SpeedDriven, TorqueDriven, model_class
 from ._errors import InputError
 
 #: Columns every recording has.
@@ -87,7 +87,12 @@ class Recording:
             raise KeyError(f"{self.source}: channel(s) {missing} not in recording {self.channel_names}")
         return np.stack([self.channels[n] for n in names], axis=-1)
 
-    def inputs(self, *, longitudinal: str | type | None = None, wheel_radius: float | None = None):
+    def inputs(
+        self,
+        *,
+        longitudinal: LongitudinalMode | type[AbstractVehicleModel] | None = None,
+        wheel_radius: float | None = None,
+    ):
         """The driver inputs as a `vdsbi.simulator.Inputs` on this grid.
 
         Args:
@@ -113,7 +118,7 @@ class Recording:
             return Inputs(self.t[0], self.dt, self.steer, self.torque_front, self.torque_rear)
         return Inputs(**_speed_inputs(self, wheel_radius))
 
-    def _longitudinal(self, longitudinal: str | type | None) -> type:
+    def _longitudinal(self, longitudinal: LongitudinalMode | type[AbstractVehicleModel] | None) -> type:
         if longitudinal is None:
             return TorqueDriven if self.has_torques else SpeedDriven
         cls = model_class(longitudinal)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from typing import Literal
 
 import numpy as np
 import pandas as pd
@@ -34,7 +35,9 @@ class Segment:
         return self.t1 - self.t0
 
 
-def _rolling(x: np.ndarray, n: int, how: str) -> np.ndarray:
+def _rolling(x: np.ndarray, n: int, how: Literal["mean", "std"]) -> np.ndarray:
+    if how not in ("mean", "std"):
+        raise ValueError(f"how must be 'mean' or 'std', got {how!r}")
     r = pd.Series(x).rolling(n, center=True, min_periods=1)
     return getattr(r, how)().to_numpy()
 
@@ -92,22 +95,47 @@ def lateral_level(rec: Recording, speed: np.ndarray) -> tuple[np.ndarray, np.nda
     return None
 
 
+@dataclasses.dataclass(frozen=True)
+class SegmentRules:
+    """What makes driving usable for `find_segments`.
+
+    Attributes:
+        min_speed: slowest usable speed, m/s (the tire-slip model is singular near standstill).
+        max_quiet: longest quiet spell, s, kept between usable stretches.
+        min_torque_std: total axle torque std, N·m, over a centred `window` that counts as
+            informative driving.
+        window: that window, s.
+        max_duration: longest usable segment, s; longer ones are split into equal pieces.
+            None (default): no split.
+    """
+
+    min_speed: float = 5.0
+    max_quiet: float = 3.0
+    min_torque_std: float = 100.0
+    window: float = 2.0
+    max_duration: float | None = None
+
+    def __post_init__(self):
+        if self.min_speed < 0 or self.max_quiet < 0 or self.min_torque_std < 0 or not self.window > 0:
+            raise ValueError(f"SegmentRules wants non-negative thresholds and window > 0, got {self}")
+        if self.max_duration is not None and not self.max_duration > 0:
+            raise ValueError(f"SegmentRules.max_duration must be > 0 or None, got {self.max_duration}")
+
+
 def find_segments(
     rec: Recording,
     *,
-    min_speed: float = 5.0,
+    rules: SegmentRules = SegmentRules(),
     min_duration: float | None = None,
-    max_duration: float | None = None,
     burn_in: float = 1.0,
-    max_quiet: float = 3.0,
     torques: bool | None = None,
-    min_torque_std: float = 100.0,
-    window: float = 2.0,
     exclude: Sequence[tuple[float, float, str]] = (),
     longest_minimum: float = np.inf,
     wheel_radius: float | None = None,
 ) -> list[Segment]:
     """Split a recording into usable and rejected stretches, covering all of it in time order.
+    `rules` (`SegmentRules`) gives `min_speed`, `max_quiet`, `min_torque_std`, `window` and
+    `max_duration`.
 
     A sample is usable where the speed (`forward_speed`: vx, else mean wheel speed ×
     `wheel_radius`, else the estimate from ax and ay ≈ v_x·r), averaged over 0.5 s, is at
@@ -132,6 +160,7 @@ def find_segments(
         Segments whose reasons give the deciding figure: "cornering: |v·r| rms 2.1 m/s² …",
         "straight: …", "speed below 5 m/s", "too short (…)", or an `exclude` reason.
     """
+    min_speed, max_quiet, max_duration = rules.min_speed, rules.max_quiet, rules.max_duration
     t = rec.t
     speed = forward_speed(rec, wheel_radius if wheel_radius is not None else FALLBACK_WHEEL_RADIUS)
     if speed is None:
@@ -139,7 +168,7 @@ def find_segments(
     n_level = max(1, int(round(LEVEL_WINDOW * rec.rate)))
     fast = _rolling(speed, n_level, "mean") >= min_speed
     use_torques = rec.has_torques and (torques is None or torques)
-    evidence = _evidence(rec, speed, use_torques, window, min_torque_std)
+    evidence = _evidence(rec, speed, use_torques, rules.window, rules.min_torque_std)
     informed = _informed(evidence, rec.num_samples, n_level, int(round(max_quiet * rec.rate)))
     runs = _labelled_runs(t, fast, informed, exclude)
     # Lead-ins and run-outs first (they move the bounds of the quiet runs), then the segments.

@@ -235,14 +235,9 @@ def _select_windows(
     """`choose_windows` under `settings`, leaving out the slides `_limit_stretches` names."""
     return choose_windows(
         rec,
+        settings,
         wheel_radius=vehicle.wheel_radius,
-        max_window=settings.max_window,
-        burn_in=settings.burn_in,
         torques=issubclass(model, TorqueDriven),
-        held_out=settings.held_out,
-        min_windows_to_split=settings.min_windows_to_split,
-        max_windows=settings.max_windows,
-        quiet_edges=settings.quiet_edges,
         exclude=_limit_stretches(rec, vehicle, settings),
     )
 

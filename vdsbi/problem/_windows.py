@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
 from ..io import Recording, Segment, find_segments, forward_speed, running_mean
+
+if TYPE_CHECKING:
+    from ._problem import ProblemSettings
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,19 +114,15 @@ def _quiet_edges(rec: Recording, pieces, activity: np.ndarray, max_window: float
 
 def choose_windows(
     rec: Recording,
+    settings: ProblemSettings,
     *,
     wheel_radius: float,
-    max_window: float,
-    held_out: float,
-    min_windows_to_split: int,
-    max_windows: int | None,
-    burn_in: float = 1.0,
     min_duration: float | None = None,
     torques: bool = True,
-    quiet_edges: bool = True,
     exclude: Sequence[tuple[float, float, str]] = (),
 ) -> tuple[list[Window], dict]:
-    """Windows over every usable stretch of `rec`, and why.
+    """Windows over every usable stretch of `rec`, and why; `settings` gives `max_window`,
+    `burn_in`, `held_out`, `min_windows_to_split`, `max_windows` and `quiet_edges`.
 
     The usable driving (`vdsbi.io.find_segments`: moving and informing the lateral dynamics,
     or with `torques` the longitudinal; each stretch with a lead-in of `burn_in` s and at least
@@ -143,6 +142,9 @@ def choose_windows(
         "dropped"}, "lateral_information_share" (`lateral_information_share`, absent without
         lateral channels) and "how".
     """
+    max_window, burn_in, held_out = settings.max_window, settings.burn_in, settings.held_out
+    min_windows_to_split, max_windows = settings.min_windows_to_split, settings.max_windows
+    quiet_edges = settings.quiet_edges
     longest = min(max_window, 0.9 * rec.duration)
     segs = find_segments(
         rec,
