@@ -30,7 +30,7 @@ from jaxtyping import PRNGKeyArray
 from scipy import stats
 
 from ..estimation import PRIOR_Z_STD, NoiseModel, measure_noise
-from ..problem import Box, Problem, simulate_draws, split_parameters, windowed_model
+from ..problem import CLEAN_BATCH, Box, Problem, simulate_draws, split_parameters, windowed_model
 from ._amortized import Proposal
 from ._psis import psis
 
@@ -119,7 +119,9 @@ def importance_check(
     theta = np.asarray(jax.vmap(box.from_unbounded)(jnp.asarray(np.concatenate([probes, z]))), np.float32)
     wm = windowed_model(problem, effects)
     th, ep = split_parameters(theta, effects)
-    pred, ok = simulate_draws(None, wm, th, effect_params=ep)
+    # Fewer draws than the simulator's shared batch run as their own batch, not padded to it.
+    batch = draws if draws < CLEAN_BATCH else None
+    pred, ok = simulate_draws(None, wm, th, effect_params=ep, max_batch=batch)
     pred, ok = np.asarray(pred, float), np.asarray(ok)
     mask = np.asarray(problem.train)
     moved = np.any(np.where(mask[None, ..., None], pred[1 : p + 1] != pred[:1], False), axis=(1, 2, 3))

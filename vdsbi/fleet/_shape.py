@@ -4,16 +4,23 @@ once and every later drive (and every later worker, through the persistent cache
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 
 from ..io import InputError
 from ..problem import Problem
 
-#: Windows are padded to a multiple of this many (a drive of 1–4 windows and one of 5–8 each
-#: share a program).
-WINDOW_BUCKET = 4
+#: Window counts a drive is padded up to: 1, 2, 3, then 2ᵏ and 3·2ᵏ⁻¹ (4, 6, 8, 12, …). A
+#: simulated window costs the same whether it holds data or is padding: the padding adds less
+#: than half (a multiple of 4 made a drive of one window cost four), and a fleet of drives from
+#: seconds to hours shares a few programs.
+WINDOW_COUNTS = (1, 2, 3) + tuple(c for k in range(2, 31) for c in (2**k, 3 * 2 ** (k - 1)))
+
+
+def window_bucket(windows: int) -> int:
+    """The padded window count of a drive of `windows` windows: the least of `WINDOW_COUNTS` that
+    holds them."""
+    return next(c for c in WINDOW_COUNTS if c >= windows)
 
 
 def _hold(a: np.ndarray | None, axis1: int | None, windows: int, fill=None) -> np.ndarray | None:
@@ -38,7 +45,7 @@ def _hold(a: np.ndarray | None, axis1: int | None, windows: int, fill=None) -> n
 
 def fixed_shape(problem: Problem, seconds: float, windows: int | None = None) -> Problem:
     """`problem` with every window padded to `seconds` of model-rate samples (the compared ones
-    to match) and the windows to `windows` (default: the next multiple of `WINDOW_BUCKET`).
+    to match) and the windows to `windows` (default: `window_bucket`'s count).
     Padded samples and windows are not valid, trained on or held out; their inputs hold the
     last sample, so their simulation stays well-behaved and is never scored.
 
@@ -54,7 +61,7 @@ def fixed_shape(problem: Problem, seconds: float, windows: int | None = None) ->
             problem.source, "windows", f"a window of {longest:.1f} s exceeds the fleet's {seconds:.1f} s"
         )
     w = problem.num_windows
-    windows = WINDOW_BUCKET * math.ceil(w / WINDOW_BUCKET) if windows is None else int(windows)
+    windows = window_bucket(w) if windows is None else int(windows)
     t = np.concatenate(
         [problem.t, problem.t[:, :1] + problem.dt * np.arange(problem.t.shape[1], n)[None]], axis=1
     )

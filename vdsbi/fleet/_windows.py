@@ -113,12 +113,17 @@ def window_x(y: Float[Array, "K C"], u: Float[Array, "K 2"], mask: Bool[Array, "
     return jnp.concatenate(feats)
 
 
+#: `window_x` over a drive's windows, jitted once at module level: a worker compiles it once per
+#: padded shape, not once per drive (a jit of a fresh `vmap` is a new function each time).
+_windows_x = jax.jit(jax.vmap(window_x))
+
+
 def drive_x(problem: Problem) -> tuple[np.ndarray, np.ndarray]:
     """(W, F) statistics of a drive's windows and (W,) whether each has a fitted sample."""
     y = jnp.asarray(problem.y, jnp.float32)
     u = jnp.asarray(window_inputs(problem))
     mask = jnp.asarray(problem.train)
-    return np.asarray(jax.jit(jax.vmap(window_x))(y, u, mask)), np.asarray(problem.train.any(1))
+    return np.asarray(_windows_x(y, u, mask)), np.asarray(problem.train.any(1))
 
 
 class WindowPool(eqx.Module):

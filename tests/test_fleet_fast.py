@@ -1,0 +1,112 @@
+"""The per-drive path's shapes and shortcuts: drives of different lengths share one compiled fit,
+and the shortcuts (the window ladder, the smaller amortized check, the fit without the parameters
+the model has no use for) answer as the longer path does."""
+
+import json
+
+import numpy as np
+import pytest
+
+from vdsbi.fleet import simulated_fleet
+from vdsbi.fleet._shape import WINDOW_COUNTS, fixed_shape, window_bucket
+
+
+def test_the_window_ladder_pads_by_less_than_half_with_few_shapes():
+    counts = [window_bucket(w) for w in range(1, 1001)]
+    assert counts[:4] == [1, 2, 3, 4]
+    assert all(w <= c < 1.5 * w for w, c in zip(range(1, 1001), counts))
+    assert len(set(counts)) <= 20
+    assert list(WINDOW_COUNTS) == sorted(set(WINDOW_COUNTS))
+
+
+def _drives(tmp_path, durations):
+    """One simulated drive per duration (one car each), their truths, and the platform of them."""
+    from vdsbi.fleet._platform import drive_problem, make_platform
+
+    out = []
+    for i, seconds in enumerate(durations):
+        manifest = simulated_fleet(
+            tmp_path / f"fleet{i}", cars=1, drives=1, duration=seconds, changes=(), seed=2
+        )
+        folder = manifest.parent
+        recording, vehicle = folder / "car01" / "drive0.csv", folder / "vehicle.json"
+        truth = json.loads((folder / "truth.json").read_text())["car01/drive0.csv"]["values"]
+        out.append((recording, vehicle, truth))
+    platform = make_platform(out[0][1], [drive_problem(r, v) for r, v, _ in out])
+    return out, platform
+
+
+def _crude(box, truth):
+    """A Gaussian 1.5 prior std off the truth in every coordinate: its check fails, a fit follows."""
+    from vdsbi.estimation import PRIOR_Z_STD
+    from vdsbi.fleet._amortized import Proposal
+
+    centre = np.asarray(box.to_unbounded(np.asarray([truth.get(n, np.nan) for n in box.names])), float)
+    centre = np.where(np.isfinite(centre), centre, 0.0) + 1.5 * PRIOR_Z_STD * np.where(centre > 0, -1, 1)
+    return Proposal(centre, np.eye(box.dim) * (0.5 * PRIOR_Z_STD) ** 2, 1)
+
+
+def _answer(drive, platform, truth, tmp_path, monkeypatch):
+    import jax
+
+    from vdsbi.fleet import _drive
+
+    monkeypatch.setattr(_drive, "_estimator", lambda *a: None)
+    monkeypatch.setattr(_drive, "drive_proposal", lambda *a: _crude(platform.box, truth))
+    recording, vehicle = drive
+    d = type("Drive", (), {"recording": recording, "vehicle": vehicle})()
+    return _drive._answer(
+        jax.random.key(0), d, platform, tmp_path, None, tmp_path / "out", _drive.Escalation(), 10, {}
+    )
+
+
+@pytest.mark.slow
+def test_a_worker_compiles_the_drive_fit_once_for_drives_of_two_lengths(tmp_path, monkeypatch):
+    """A 22 s and a 30 s drive (three windows of different lengths each): the second drive's fit
+    reuses the program the first compiled (the fit's Levenberg–Marquardt loop is traced once)."""
+    import jax
+
+    import vdsbi.estimation._likelihood as likelihood
+    from vdsbi.fleet._platform import WINDOW_SECONDS, drive_problem
+
+    drives, platform = _drives(tmp_path, (22.0, 30.0))
+    shapes = {
+        fixed_shape(drive_problem(r, v), WINDOW_SECONDS).y.shape for r, v, _ in drives
+    }  # one padded shape, from different lengths
+    assert len(shapes) == 1
+    assert len({drive_problem(r, v).y.shape for r, v, _ in drives}) == 2
+    traces = []
+    inner = likelihood.levenberg_marquardt
+    monkeypatch.setattr(likelihood, "levenberg_marquardt", lambda *a, **k: traces.append(1) or inner(*a, **k))
+    jax.clear_caches()  # the count starts here, whatever earlier tests compiled
+    seen = []
+    for r, v, truth in drives:
+        record = _answer((r, v), platform, truth, tmp_path, monkeypatch)
+        assert record["method"] == "amortized+fit", record.get("escalated_because")
+        seen.append(len(traces))
+    assert seen == [1, 1]
+
+
+@pytest.mark.slow
+def test_the_shortcuts_answer_a_drive_as_the_longer_path_does(tmp_path, monkeypatch):
+    """The same drive by the path without the shortcuts (4 padded windows, a 128-draw amortized
+    check, the fit over every parameter, the longitudinal slip stiffnesses' zero columns
+    included) and by the present one: the same level, and each identified parameter's mean and
+    90 % interval within half a posterior std of the other's."""
+    from vdsbi.fleet import _drive
+
+    drives, platform = _drives(tmp_path, (30.0,))
+    (r, v, truth) = drives[0]
+    fast = _answer((r, v), platform, truth, tmp_path, monkeypatch)
+    monkeypatch.setattr(_drive, "AMORTIZED_DRAWS", 128)
+    monkeypatch.setattr(_drive, "fitted_parameters", lambda p: p.box.names)
+    monkeypatch.setattr(_drive, "fixed_shape", lambda p, s: fixed_shape(p, s, windows=4))
+    slow = _answer((r, v), platform, truth, tmp_path, monkeypatch)
+    assert fast["method"] == slow["method"] == "amortized+fit"
+    for name, q in slow["parameters"].items():
+        p = fast["parameters"][name]
+        assert p["identified"] == q["identified"], name
+        if not q["identified"]:
+            continue
+        for key in ("mean", "q05", "q95"):
+            assert abs(p[key] - q[key]) < 0.5 * q["std"], (name, key, p, q)
