@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from vdsbi.fleet import simulated_fleet
-from vdsbi.fleet._shape import WINDOW_COUNTS, fixed_shape, window_bucket
+from vdsbi.fleet._shape import LENGTH_FRACTIONS, WINDOW_COUNTS, fixed_shape, length_bucket, window_bucket
 
 
 def test_the_window_ladder_pads_by_less_than_half_with_few_shapes():
@@ -17,6 +17,22 @@ def test_the_window_ladder_pads_by_less_than_half_with_few_shapes():
     assert all(w <= c < 1.5 * w for w, c in zip(range(1, 1001), counts))
     assert len(set(counts)) <= 20
     assert list(WINDOW_COUNTS) == sorted(set(WINDOW_COUNTS))
+
+
+def test_a_drive_is_padded_to_the_shortest_length_that_holds_its_windows(tmp_path):
+    from vdsbi.fleet._platform import WINDOW_SECONDS, drive_problem
+
+    ((r, v, _),), _ = _drives(tmp_path, (30.0,))
+    problem = drive_problem(r, v)
+    longest = problem.t.shape[1] * problem.dt
+    lengths = [f * WINDOW_SECONDS for f in LENGTH_FRACTIONS]
+    chosen = length_bucket(problem, WINDOW_SECONDS)
+    assert chosen == min(x for x in lengths if x >= longest)
+    assert fixed_shape(problem, chosen).t.shape[1] * problem.dt <= chosen + 1e-9
+    # a window longer than the shorter length: the next one
+    assert (
+        length_bucket(problem, 0.99 * longest / LENGTH_FRACTIONS[0]) == 0.99 * longest / LENGTH_FRACTIONS[0]
+    )
 
 
 def _drives(tmp_path, durations):
@@ -70,10 +86,10 @@ def test_a_worker_compiles_the_drive_fit_once_for_drives_of_two_lengths(tmp_path
     from vdsbi.fleet._platform import WINDOW_SECONDS, drive_problem
 
     drives, platform = _drives(tmp_path, (22.0, 30.0))
-    shapes = {
-        fixed_shape(drive_problem(r, v), WINDOW_SECONDS).y.shape for r, v, _ in drives
-    }  # one padded shape, from different lengths
-    assert len(shapes) == 1
+    padded = [
+        fixed_shape(p, length_bucket(p, WINDOW_SECONDS)) for p in (drive_problem(r, v) for r, v, _ in drives)
+    ]
+    assert len({p.y.shape for p in padded}) == 1  # one padded shape, from different lengths
     assert len({drive_problem(r, v).y.shape for r, v, _ in drives}) == 2
     traces = []
     inner = likelihood.levenberg_marquardt

@@ -41,7 +41,7 @@ from ._amortized import PlatformEstimator, Proposal, drive_proposal
 from ._check import CheckResult, importance_check, k_threshold, weighted_summary
 from ._manifest import Drive
 from ._platform import WINDOW_SECONDS, Platform, drive_problem
-from ._shape import fixed_shape
+from ._shape import fixed_shape, length_bucket
 from ._windows import drive_x
 
 #: Spread of the t proposal over the amortized posterior (crude: wide) and over the fit's Laplace
@@ -176,7 +176,7 @@ def _answer(
         why = platform.fits(problem)
     if why is None:
         try:
-            problem = fixed_shape(problem, WINDOW_SECONDS)
+            problem = fixed_shape(problem, length_bucket(problem, WINDOW_SECONDS))
         except InputError as err:
             why = err.detail
     if why is not None:

@@ -17,6 +17,21 @@ from ..problem import Problem
 WINDOW_COUNTS = (1, 2, 3) + tuple(c for k in range(2, 31) for c in (2**k, 3 * 2 ** (k - 1)))
 
 
+#: Window lengths a drive is padded up to, as fractions of the longest window the cut makes: a
+#: drive whose windows all stay short simulates a fifth less, at the cost of one more program.
+LENGTH_FRACTIONS = (0.8, 1.0)
+
+
+def length_bucket(problem: Problem, longest: float) -> float:
+    """The padded window length of `problem`, s: the least of `LENGTH_FRACTIONS` · `longest`
+    that holds its longest window (`longest` itself when none does; `fixed_shape` then says so)."""
+    for fraction in LENGTH_FRACTIONS:
+        n = int(round(fraction * longest / problem.dt))
+        if problem.t.shape[1] <= n - n % problem.factor:
+            return fraction * longest
+    return longest
+
+
 def window_bucket(windows: int) -> int:
     """The padded window count of a drive of `windows` windows: the least of `WINDOW_COUNTS` that
     holds them."""
