@@ -72,7 +72,7 @@ def _answer(drive, platform, truth, tmp_path, monkeypatch):
     recording, vehicle = drive
     d = type("Drive", (), {"recording": recording, "vehicle": vehicle})()
     return _drive._answer(
-        jax.random.key(0), d, platform, tmp_path, None, tmp_path / "out", _drive.Escalation(), 10, {}
+        jax.random.key(0), d, (platform, tmp_path, None), tmp_path / "out", _drive.Escalation(), 10, {}
     )
 
 

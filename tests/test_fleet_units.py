@@ -221,7 +221,13 @@ def test_a_crude_proposal_is_answered_by_the_fit_its_check_starts(tmp_path, monk
     drive = type("Drive", (), {"recording": recording, "vehicle": vehicle})()
     stages = {}
     record = _drive._answer(
-        jax.random.key(0), drive, platform, tmp_path, None, tmp_path / "out", _drive.Escalation(), 10, stages
+        jax.random.key(0),
+        drive,
+        (platform, tmp_path, None),
+        tmp_path / "out",
+        _drive.Escalation(),
+        10,
+        stages,
     )
     assert record["method"] == "amortized+fit", record.get("escalated_because")
     # Each check failed but the last, a fit's: the amortized one, then a fit's, then its refit's.

@@ -102,7 +102,7 @@ def answer_drive(
     folder = drive_folder(out, drive)
     folder.mkdir(parents=True, exist_ok=True)
     attempt = _mark_running(folder)
-    platform, est_folder, no_estimator = prepared
+    platform = prepared[0]
     # Keyed by what the manifest says (car and recording), not where the files lie: the same
     # manifest answers alike from any folder.
     own = int(hashlib.sha1(f"{drive.car}\n{drive.name}".encode()).hexdigest()[:8], 16)
@@ -122,9 +122,7 @@ def answer_drive(
     start, cpu = time.perf_counter(), time.process_time()
     stages: dict[str, float] = {}
     try:
-        record |= _answer(
-            key, drive, platform, est_folder, no_estimator, folder, escalation, draws_per_window, stages
-        )
+        record |= _answer(key, drive, prepared, folder, escalation, draws_per_window, stages)
     except InputError as err:
         record |= {"method": "failed", "error": str(err)}
     except Exception as err:  # a bug or an unforeseen recording: recorded, the fleet goes on
@@ -165,9 +163,8 @@ def _timed(stages: dict, name: str, fn, *args, **kwargs):
         stages[name] = stages.get(name, 0.0) + time.perf_counter() - t
 
 
-def _answer(
-    key, drive, platform, est_folder, no_estimator, folder, escalation, draws_per_window, stages
-) -> dict:
+def _answer(key, drive, prepared, folder, escalation, draws_per_window, stages) -> dict:
+    platform, est_folder, no_estimator = prepared
     k_prop, k_check, k_fit_check = jax.random.split(key, 3)
     why = no_estimator
     problem = None
