@@ -150,10 +150,9 @@ def real(folder: Path, workers: int, answered: Path | None = None) -> dict:
             records = fleet(manifest, fleet_out, FleetSettings(), Cluster(workers=workers), log=print).records
         else:
             records = [json.loads(f.read_text()) for f in sorted((answered / "drives").glob("*/result.json"))]
-        platforms = {}
-        for f in (fleet_out / "platforms").glob("*/platform.json"):
-            record = json.loads(f.read_text())["platform"]
-            platforms[record["id"]] = record["effects"]
+        misfits = {}
+        if (fleet_out / "misfit.json").exists():
+            misfits = {m["platform"]: m for m in json.loads((fleet_out / "misfit.json").read_text())}
         out = {}
         for r in records:
             if r["car"] not in {x["car"] for x in rows}:
@@ -166,30 +165,38 @@ def real(folder: Path, workers: int, answered: Path | None = None) -> dict:
                 }
                 continue
             row = next(x for x in rows if x["car"] == r["car"])
-            effects = platforms.get(r.get("platform"))  # None: identify's own defaults, as the fleet's
+            # identify alone reads the drive as the fleet did (following the measured speed) with
+            # the effects the fleet's answer has
+            named = [n.split(".")[0] for n in r["parameters"] if "." in n]
             start = time.perf_counter()
             alone = api.identify(
                 row["recording"],
                 row["vehicle"],
                 api.IdentifyOptions(
-                    drive=api.DriveOptions(holdout=0.0),
-                    model=api.ModelOptions(effects=None if effects is None else tuple(effects)),
+                    drive=api.DriveOptions(holdout=0.0, longitudinal="speed"),
+                    model=api.ModelOptions(effects=tuple(dict.fromkeys(named))),
                 ),
             )
             seconds = time.perf_counter() - start
             params = {}
             for name, p in r.get("parameters", {}).items():
-                q = alone.summary["parameters"][name]
+                q = alone.summary["parameters"].get(name)
+                if q is None:
+                    continue
                 params[name] = {
                     "fleet": [p["q05"], p["estimate"], p["q95"], p["identified"]],
                     "identify": [q["q05"], q["estimate"], q["q95"], q.get("identified") is not False],
                 }
+            misfit = next((m for k, m in misfits.items() if k.startswith(r["car"] + "/")), None)
             out[r["car"]] = {
                 "method": r["method"],
                 "checks": r.get("checks"),
                 "fleet_seconds": r["seconds"],
                 "identify_seconds": round(seconds, 1),
                 "parameters": params,
+                "diagnosis": None
+                if misfit is None
+                else {k: misfit[k] for k in ("detected", "named", "claimed", "verdict")},
             }
     return out
 
@@ -212,6 +219,9 @@ def real_markdown(s: dict) -> str:
             lines.append(
                 f"| {name} | {f[0]:.4g} / {f[1]:.4g} / {f[2]:.4g} ({f[3]}) | {i[0]:.4g} / {i[1]:.4g} / {i[2]:.4g} ({i[3]}) |"
             )
+        if r.get("diagnosis"):
+            d = r["diagnosis"]
+            lines += ["", f"The platform's diagnosis (its one drive): {d['verdict']}"]
         lines.append("")
     return "\n".join(lines)
 
