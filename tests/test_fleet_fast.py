@@ -77,47 +77,42 @@ def _answer(drive, platform, truth, tmp_path, monkeypatch):
 
 
 @pytest.mark.slow
-def test_a_worker_compiles_the_drive_fit_once_for_drives_of_two_lengths(tmp_path, monkeypatch):
+def test_drives_of_two_lengths_share_one_fit_and_the_shortcuts_answer_as_the_longer_path(
+    tmp_path, monkeypatch
+):
     """A 22 s and a 30 s drive (three windows of different lengths each): the second drive's fit
-    reuses the program the first compiled (the fit's Levenberg–Marquardt loop is traced once)."""
+    reuses the program the first compiled (the fit's Levenberg–Marquardt loop is traced once).
+    Then the 30 s drive by the path without the shortcuts (the longest window length, 4 padded
+    windows, a 128-draw amortized check, the fit over every parameter, the longitudinal slip
+    stiffnesses' zero columns included): the same level, and each identified parameter's mean and
+    90 % interval within half a posterior std of the other's."""
     import jax
 
     import vdsbi.estimation._likelihood as likelihood
+    from vdsbi.fleet import _drive
     from vdsbi.fleet._platform import WINDOW_SECONDS, drive_problem
 
     drives, platform = _drives(tmp_path, (22.0, 30.0))
-    padded = [
-        fixed_shape(p, length_bucket(p, WINDOW_SECONDS)) for p in (drive_problem(r, v) for r, v, _ in drives)
-    ]
+    problems = [drive_problem(r, v) for r, v, _ in drives]
+    padded = [fixed_shape(p, length_bucket(p, WINDOW_SECONDS)) for p in problems]
     assert len({p.y.shape for p in padded}) == 1  # one padded shape, from different lengths
-    assert len({drive_problem(r, v).y.shape for r, v, _ in drives}) == 2
+    assert len({p.y.shape for p in problems}) == 2
     traces = []
     inner = likelihood.levenberg_marquardt
     monkeypatch.setattr(likelihood, "levenberg_marquardt", lambda *a, **k: traces.append(1) or inner(*a, **k))
     jax.clear_caches()  # the count starts here, whatever earlier tests compiled
-    seen = []
+    seen, records = [], []
     for r, v, truth in drives:
-        record = _answer((r, v), platform, truth, tmp_path, monkeypatch)
-        assert record["method"] == "amortized+fit", record.get("escalated_because")
+        records.append(_answer((r, v), platform, truth, tmp_path, monkeypatch))
+        assert records[-1]["method"] == "amortized+fit", records[-1].get("escalated_because")
         seen.append(len(traces))
     assert seen == [1, 1]
 
-
-@pytest.mark.slow
-def test_the_shortcuts_answer_a_drive_as_the_longer_path_does(tmp_path, monkeypatch):
-    """The same drive by the path without the shortcuts (4 padded windows, a 128-draw amortized
-    check, the fit over every parameter, the longitudinal slip stiffnesses' zero columns
-    included) and by the present one: the same level, and each identified parameter's mean and
-    90 % interval within half a posterior std of the other's."""
-    from vdsbi.fleet import _drive
-
-    drives, platform = _drives(tmp_path, (30.0,))
-    (r, v, truth) = drives[0]
-    fast = _answer((r, v), platform, truth, tmp_path, monkeypatch)
+    (r, v, truth), fast = drives[1], records[1]
     monkeypatch.setattr(_drive, "AMORTIZED_DRAWS", 128)
     monkeypatch.setattr(_drive, "fitted_parameters", lambda p: p.box.names)
-    monkeypatch.setattr(_drive, "fixed_shape", lambda p, s: fixed_shape(p, s, windows=4))
-    slow = _answer((r, v), platform, truth, tmp_path, monkeypatch)
+    monkeypatch.setattr(_drive, "fixed_shape", lambda p, s: fixed_shape(p, WINDOW_SECONDS, windows=4))
+    slow = _answer((r, v), platform, truth, tmp_path / "slow", monkeypatch)
     assert fast["method"] == slow["method"] == "amortized+fit"
     for name, q in slow["parameters"].items():
         p = fast["parameters"][name]
