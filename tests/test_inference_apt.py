@@ -420,21 +420,20 @@ def test_fit_takes_an_optax_optimizer(getkey):
     # `fit` trains with the optimiser it is given; a schedule needs an injected learning rate
     import optax
 
-    from vdsbi.inference._train import fit
+    from vdsbi.inference._train import Examples, fit
 
     theta, x, flow, _ = _tiny_problem(getkey, 128)
-    is_val, prior_mask = np.arange(128) % 8 == 0, np.ones(128, bool)
-    data = (theta, x, prior_mask, is_val)
+    data = Examples(theta, x, np.ones(128, bool), np.arange(128) % 8 == 0)
     training = TrainingSettings(batch_size=32, max_epochs=2, patience=2)
     loss, key = MaximumLikelihoodLoss(), getkey()
-    default, _ = fit(key, flow, *data, loss, training)
-    same, _ = fit(key, flow, *data, loss, training, make_optimizer(training))
+    default, _ = fit(key, flow, data, loss, training)
+    same, _ = fit(key, flow, data, loss, training, make_optimizer(training))
     assert tree_allclose(default, same, rtol=0, atol=0)
-    sgd, info = fit(key, flow, *data, loss, training, optax.sgd(1e-2))
+    sgd, info = fit(key, flow, data, loss, training, optax.sgd(1e-2))
     assert info["epochs"] == 2 and not tree_allclose(sgd, default)
     cosine = dataclasses.replace(training, cosine_decay=True)
     with pytest.raises(ValueError, match="inject_hyperparams"):
-        fit(key, flow, *data, loss, cosine, optax.sgd(1e-2))
+        fit(key, flow, data, loss, cosine, optax.sgd(1e-2))
 
 
 def test_eval_steps_ignores_padding_batches(getkey):

@@ -1,6 +1,7 @@
 """Sequential neural posterior estimation: NPE (round 1) and APT / SNPE-C (later rounds)."""
 
 import dataclasses
+import functools
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -20,7 +21,7 @@ from ._loss import AtomicLoss
 from ._posterior import Posterior, on_one_device, sample_flow
 from ._prior import BoxPrior
 from ._sharding import data_mesh
-from ._train import fit
+from ._train import Examples, fit
 from ._truncation import truncated_prior
 
 
@@ -241,19 +242,9 @@ def _train_round(
         loss = first_round_loss(config.flow)
     else:
         loss = _atomic_loss(seq, problem.x_o)
-    flow, finfo = fit(
-        k_train,
-        flow,
-        theta,
-        x,
-        round_ids == 0,
-        is_val,
-        loss,
-        training,
-        on_epoch_end=problem.on_epoch_end,
-        round_index=r,
-        mesh=problem.mesh,
-    )
+    report = None if problem.on_epoch_end is None else functools.partial(problem.on_epoch_end, r)
+    examples = Examples(theta, x, round_ids == 0, is_val)
+    flow, finfo = fit(k_train, flow, examples, loss, training, on_epoch_end=report, mesh=problem.mesh)
     info = {"loss": type(loss).__name__, "patience": patience, "cosine_decay": training.cosine_decay}
     return flow, {**finfo, **info, "max_epochs": training.max_epochs}
 

@@ -1,5 +1,6 @@
 """Amortised NPE on simulations the caller already has (no simulator, no rounds)."""
 
+import functools
 from collections.abc import Callable
 from typing import Any
 
@@ -12,7 +13,7 @@ from ._config import NPEConfig
 from ._embeddings import AbstractEmbedding
 from ._estimator import AbstractEstimator
 from ._prior import BoxPrior
-from ._train import fit
+from ._train import Examples, fit
 
 
 def npe(
@@ -45,5 +46,6 @@ def npe(
     is_val[np.asarray(jax.random.permutation(k_split, m))[:n_val]] = True
     flow = build_flow(k_init, prior, embedding, theta[~is_val], x[~is_val], config.flow)
     loss = first_round_loss(config.flow)
-    data = (theta, x, np.ones(m, bool), is_val)
-    return fit(k_train, flow, *data, loss, config.training, mesh=mesh, on_epoch_end=on_epoch_end)
+    examples = Examples(theta, x, np.ones(m, bool), is_val)
+    report = None if on_epoch_end is None else functools.partial(on_epoch_end, 0)
+    return fit(k_train, flow, examples, loss, config.training, mesh=mesh, on_epoch_end=report)

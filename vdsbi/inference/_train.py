@@ -1,5 +1,6 @@
 """Training loop: one jitted step, AdamW + clipping, validation split, early stopping."""
 
+import dataclasses
 import functools
 import math
 from collections.abc import Callable
@@ -294,23 +295,35 @@ class _EarlyStopping:
         }
 
 
+@dataclasses.dataclass(frozen=True)
+class Examples:
+    """The simulations `fit` trains on, host arrays with one row per simulation: ``theta``
+    (N, d), ``x`` (N, ...), ``prior_mask`` (N,) True where θ was drawn from the prior, and
+    ``is_val`` (N,) True on the rows held out for validation."""
+
+    theta: np.ndarray
+    x: np.ndarray
+    prior_mask: np.ndarray
+    is_val: np.ndarray
+
+
+#: Training steps per compiled block: enough to amortise Python's dispatch of a small flow's
+#: step, few enough that an epoch's padding steps cost little.
+STEPS_PER_CALL = 32
+
+
 def fit(
     key: PRNGKeyArray,
     flow: AbstractEstimator,
-    theta: np.ndarray,
-    x: np.ndarray,
-    prior_mask: np.ndarray,
-    is_val: np.ndarray,
+    examples: Examples,
     loss: AbstractLoss,
     training: TrainingSettings,
     optimizer: optax.GradientTransformation | None = None,
     *,
-    on_epoch_end: Callable | None = None,
-    round_index: int = 0,
+    on_epoch_end: Callable[[int, float, float], None] | None = None,
     mesh=None,
-    steps_per_call: int = 32,
 ):
-    """Train ``flow`` on ``theta``/``x`` (host arrays); return the best-validation flow and an info dict.
+    """Train ``flow`` on ``examples``; return the best-validation flow and an info dict.
 
     ``training`` gives the batch size, epochs, patience, learning-rate schedule and weight
     averaging; ``optimizer`` defaults to ``make_optimizer(training)`` (``cosine_decay`` needs
@@ -318,25 +331,26 @@ def fit(
 
     Batches have a fixed size (ragged last batch dropped), a multiple of the device count; the
     batch axis is sharded over ``mesh`` and the model is replicated. Steps run in compiled
-    blocks of exactly ``steps_per_call`` (a ``lax.scan``; the last block of an epoch padded with
+    blocks of exactly `STEPS_PER_CALL` (a ``lax.scan``; the last block of an epoch padded with
     masked no-op steps), so per-step Python dispatch is amortised and the loop is compiled once
     per loss and batch size, not once per data size. ``cosine_decay`` (see
     `cosine_learning_rate`) sets the learning rate per epoch over ``max_epochs``.
     With ``averaging`` (`WeightAveraging`), validation, early stopping and the returned flow
     use an exponential moving average of the weights, started from ``flow``.
+    ``on_epoch_end(epoch, train_loss, val_loss)`` is called after every epoch.
     """
     optimizer = make_optimizer(training) if optimizer is None else optimizer
     mesh = data_mesh() if mesh is None else mesh
-    tr, va = np.flatnonzero(~is_val), np.flatnonzero(is_val)
+    tr, va = np.flatnonzero(~examples.is_val), np.flatnonzero(examples.is_val)
     bsz, vsz = _batch_sizes(tr.size, va.size, training.batch_size, mesh.devices.size)
     state, decay = _train_state(flow, optimizer, mesh, training.averaging, tr.size // bsz)
     key, val_key = jax.random.split(key)
-    data = (theta, x, prior_mask)
-    val_batches = _validation_blocks(data, va, vsz, steps_per_call, mesh)
+    data = (examples.theta, examples.x, examples.prior_mask)
+    val_batches = _validation_blocks(data, va, vsz, STEPS_PER_CALL, mesh)
     # The validation loop compiles on a second thread while the first training block
     # compiles (XLA compiles without holding the GIL); its value, the initial loss, is unused.
     warm = in_background(eval_steps, state[0], val_batches[0][0], val_key, loss, val_batches[0][1])
-    epochs = _Epochs(data, tr, bsz, steps_per_call, mesh, loss, optimizer, decay)
+    epochs = _Epochs(data, tr, bsz, STEPS_PER_CALL, mesh, loss, optimizer, decay)
     stopping = _EarlyStopping(state[0], training.patience)
     for epoch in range(training.max_epochs):
         key, k_perm, k_steps = jax.random.split(key, 3)
@@ -347,7 +361,7 @@ def fit(
         val_loss = _validation_loss(flow, val_batches, val_key, loss)
         stop = stopping.update(epoch, flow, train_loss, val_loss)
         if on_epoch_end is not None:
-            on_epoch_end(round_index, epoch, train_loss, val_loss)
+            on_epoch_end(epoch, train_loss, val_loss)
         if stop:
             break
     return stopping.flow, stopping.info(bsz)
