@@ -9,7 +9,7 @@ import pytest
 from test_likelihood import THETA, _drive
 
 from vdsbi.discovery._fit import Fitter
-from vdsbi.estimation import fit_likelihood
+from vdsbi.estimation import FitRequest, fit_likelihood
 from vdsbi.problem import Box, ProblemSettings, make_problem, parameter_names, prior_box
 from vdsbi.simulator import default_vehicle
 
@@ -25,7 +25,7 @@ def test_diagnose_and_identify_fit_one_drive_alike(x64):
     names = parameter_names(effects)
     box = Box.from_dict(prior_box(veh, effects), names)
     start = np.concatenate([THETA, [0.0, 0.0, 0.0]])
-    ident = fit_likelihood(prob, start, box, effects=effects, free=names)
+    ident = fit_likelihood(prob, start, box, FitRequest(free=names), effects=effects)
     # diagnose: every candidate effect in one model, the others at their null values
     fitter = Fitter(prob, dt=0.0025)
     z0 = fitter.initial_z(THETA)

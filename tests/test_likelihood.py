@@ -4,7 +4,7 @@ Laplace covariance."""
 import numpy as np
 import pytest
 
-from vdsbi.estimation import ModelError, fit_likelihood
+from vdsbi.estimation import FitRequest, ModelError, fit_likelihood
 from vdsbi.estimation._likelihood import prior_mean
 from vdsbi.io import build_recording
 from vdsbi.problem import Box, ProblemSettings, make_problem, prior_box, simulate_draws, windowed_model
@@ -47,9 +47,8 @@ def test_the_fit_recovers_the_stiffnesses_from_a_poor_start_and_its_interval_hol
     box = Box.from_dict(prior_box(veh), PARAM_NAMES)
     start = THETA.copy()
     start[4:] *= 0.7
-    post = fit_likelihood(
-        prob, start, box, free=("C_alpha_f", "C_alpha_r"), noise=ModelError(passes=1), max_steps=20
-    )
+    request = FitRequest(free=("C_alpha_f", "C_alpha_r"), noise=ModelError(passes=1), max_steps=20)
+    post = fit_likelihood(prob, start, box, request)
     assert post.free == ("C_alpha_f", "C_alpha_r")
     np.testing.assert_allclose(post.theta[:4], start[:4], rtol=1e-3)  # fixed ones stay
     for name, truth in zip(PARAM_NAMES[4:], THETA[4:]):
@@ -75,9 +74,9 @@ def test_a_wrong_start_speed_is_corrected_per_window_and_leaves_the_estimate_whe
     box = Box.from_dict(prior_box(veh), PARAM_NAMES)
     free = ("C_alpha_f", "C_alpha_r")  # the neighbouring tests' fits: one compilation
     prob = make_problem(_drive(), veh, settings)
-    right = fit_likelihood(prob, THETA, box, free=free, noise=ModelError(passes=1), max_steps=20)
+    right = fit_likelihood(prob, THETA, box, FitRequest(free=free, noise=ModelError(passes=1), max_steps=20))
     biased = dataclasses.replace(prob, v0=prob.v0 + 0.5)
-    high = fit_likelihood(biased, THETA, box, free=free, noise=ModelError(passes=1), max_steps=20)
+    high = fit_likelihood(biased, THETA, box, FitRequest(free=free, noise=ModelError(passes=1), max_steps=20))
     fitted = np.asarray(prob.train).any(1)
     assert fitted.sum() >= 2 and np.all(right.v0_offset[~fitted] == 0.0)
     np.testing.assert_allclose(high.v0_offset[fitted] - right.v0_offset[fitted], -0.5, atol=0.05)
@@ -94,7 +93,7 @@ def test_a_wrong_start_speed_is_corrected_per_window_and_leaves_the_estimate_whe
     assert max(chi2(high.with_fitted_starts(biased))) < 1.3 < min(chi2(biased)) / 3
     # Following the measured speed there is nothing to correct.
     speed = make_problem(_drive(), veh, ProblemSettings(longitudinal="speed", max_window=6.0))
-    assert not np.any(fit_likelihood(speed, THETA, box, free=free, max_steps=20).v0_offset)
+    assert not np.any(fit_likelihood(speed, THETA, box, FitRequest(free=free, max_steps=20)).v0_offset)
 
 
 def test_the_start_speed_columns_of_the_jacobian_come_from_one_tangent(x64):
@@ -137,9 +136,11 @@ def test_a_model_error_widens_the_interval_by_its_own_scale_and_correlation(x64)
     settings = ProblemSettings(longitudinal="speed", max_window=6.0)
     box = Box.from_dict(prior_box(veh), PARAM_NAMES)
     free = ("C_alpha_f", "C_alpha_r")
-    clean = fit_likelihood(make_problem(_drive(), veh, settings), THETA, box, free=free, max_steps=20)
+    clean = fit_likelihood(
+        make_problem(_drive(), veh, settings), THETA, box, FitRequest(free=free, max_steps=20)
+    )
     late_drive = make_problem(_drive(steer_delay=0.15), veh, settings)
-    late = fit_likelihood(late_drive, THETA, box, free=free, max_steps=20)
+    late = fit_likelihood(late_drive, THETA, box, FitRequest(free=free, max_steps=20))
     assert np.all(late.noise.model_error_ratio > 3.0 * clean.noise.model_error_ratio)
     i = [PARAM_NAMES.index(n) for n in free]
     assert np.all(np.sqrt(np.diag(late.cov_z))[i] > 3.0 * np.sqrt(np.diag(clean.cov_z))[i])
@@ -230,7 +231,7 @@ def test_a_starting_noise_model_must_be_of_the_problems_channels():
     box = Box.from_dict(prior_box(veh), PARAM_NAMES)
     other = NoiseModel(("ax",), np.ones(1), np.ones(1), np.ones(1), np.ones(1))
     with pytest.raises(ValueError, match="noise model"):
-        fit_likelihood(prob, THETA, box, noise=ModelError(start=other))
+        fit_likelihood(prob, THETA, box, FitRequest(noise=ModelError(start=other)))
 
 
 def test_prediction_draws_from_the_information_and_the_intervals_from_the_widened_covariance(getkey):
@@ -265,9 +266,8 @@ def test_the_screen_keeps_a_quadratic_posterior_and_cuts_draws_past_a_wall(x64, 
     settings = ProblemSettings(longitudinal="torque", max_window=6.0, channels=("ay", "yaw_rate"))
     prob = make_problem(_drive(), veh, settings)
     box = Box.from_dict(prior_box(veh), PARAM_NAMES)
-    post = fit_likelihood(
-        prob, THETA, box, free=("C_alpha_f", "C_alpha_r"), noise=ModelError(passes=1), max_steps=20
-    )
+    request = FitRequest(free=("C_alpha_f", "C_alpha_r"), noise=ModelError(passes=1), max_steps=20)
+    post = fit_likelihood(prob, THETA, box, request)
     draws, kept = screened_sample(getkey(), post, prob, 256)
     assert draws.shape == (256, len(PARAM_NAMES)) and kept > 0.9, kept
     i = PARAM_NAMES.index("C_alpha_f")
@@ -347,6 +347,6 @@ def test_a_start_that_does_not_simulate_is_an_infinitely_bad_fit_not_a_crash(x64
         return LeastSquaresResult(z0, r, jac, jnp.asarray(jnp.inf), jnp.asarray(0), jnp.asarray(False))
 
     monkeypatch.setattr(likelihood, "levenberg_marquardt", nowhere)
-    post = fit_likelihood(prob, THETA, box, free=("C_alpha_f", "C_alpha_r"), max_steps=5)
+    post = fit_likelihood(prob, THETA, box, FitRequest(free=("C_alpha_f", "C_alpha_r"), max_steps=5))
     assert post.chi2_dof == np.inf and not post.converged
     assert np.all(np.isfinite(post.cov_z)) and np.all(np.isfinite(post.interval(0.9)))

@@ -16,7 +16,7 @@ import numpy as np
 if TYPE_CHECKING:
     pass
 
-from ..estimation import ModelError, fit_likelihood, screened_sample
+from ..estimation import FitRequest, ModelError, fit_likelihood, screened_sample
 from ..io import InputError, SimulationError
 from ..problem import (
     Box,
@@ -129,7 +129,9 @@ def _fit_likelihood(prob: Problem, full: Problem, starts, box: Box, effects, say
         return checked, checked
     say("refitting on all the usable driving: the estimate and the posterior reported")
     start = np.concatenate([checked.theta[None], starts])
-    return checked, fit_likelihood(full, start, box, effects=effects, noise=ModelError(start=checked.noise))
+    return checked, fit_likelihood(
+        full, start, box, FitRequest(noise=ModelError(start=checked.noise)), effects=effects
+    )
 
 
 class _Setup(NamedTuple):

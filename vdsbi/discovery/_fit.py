@@ -25,7 +25,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
-from ..estimation import V0_STD, ModelError, SensorNoise, fit_likelihood
+from ..estimation import V0_STD, FitRequest, ModelError, SensorNoise, fit_likelihood
 from ..problem import Box, Problem, WindowedModel, parameter_names, windowed_model
 from ..simulator import PARAM_NAMES, Vehicle, make_model
 from ..simulator.effects import EFFECTS
@@ -290,12 +290,9 @@ class Fitter:
             problem,
             start,
             self.box,
+            FitRequest(free=free, noise=noise, max_steps=max_iter, width=self.width - self.num_windows),
             model=self.model,
-            free=free,
-            noise=noise,
-            max_steps=max_iter,
             solver=self.solver,
-            width=self.width - self.num_windows,
         )
         return self._result(effects, z, post)
 

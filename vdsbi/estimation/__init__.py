@@ -9,7 +9,11 @@ from ._least_squares import (
     laplace_covariance as laplace_covariance,
     levenberg_marquardt as levenberg_marquardt,
 )
-from ._likelihood import PRIOR_Z_STD as PRIOR_Z_STD, fit_likelihood as fit_likelihood
+from ._likelihood import (
+    PRIOR_Z_STD as PRIOR_Z_STD,
+    FitRequest as FitRequest,
+    fit_likelihood as fit_likelihood,
+)
 from ._noise import (
     ModelError as ModelError,
     NoiseModel as NoiseModel,

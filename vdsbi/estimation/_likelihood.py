@@ -23,18 +23,19 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, PRNGKeyArray
-from scipy.stats import norm
+from jaxtyping import Array, Float
 
 from ..problem import Box, Part, Problem, parameter_names, simulate_draws, split_parameters, windowed_model
 from ..simulator import PARAM_NAMES
 from ..simulator.models import AbstractVehicleModel
 from ..simulator.solvers import Solver
+from ._laplace_posterior import LikelihoodPosterior
 from ._least_squares import GaussianPrior, StepControl, laplace_covariance, levenberg_marquardt
 from ._noise import ModelError, NoiseModel, SensorNoise, measure_noise
 from ._start_speed import V0_STD, corrected_windows, own_columns, profiled, residual_and_jacobian
@@ -47,130 +48,38 @@ PRIOR_Z_STD = float(np.pi / np.sqrt(3.0))
 MAX_Z_STEP = 2.0
 
 
-class LikelihoodPosterior(eqx.Module):
-    """The Laplace posterior at the best fit, in the box's logit coordinates.
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class FitRequest:
+    """What a likelihood fit fits, on which samples, and how hard it tries (`fit_likelihood`).
 
     Attributes:
-        box: the prior box (names, bounds, bijection).
-        z: (P,) the best fit (MAP) in logit coordinates.
-        cov_z: (P, P) covariance of z (Laplace, widened by the model error the data reveal);
-            parameters not fitted keep their prior variance.
-        cov_information: (P, P) the same before the halves' disagreement widens it (`consistent_covariance`):
-            what the drive's information alone allows, which the identifiability rule reads.
-        free: names of the fitted parameters (the others carry no information in this drive).
-        noise: the noise model the fit ended with.
-        converged: the last fit stopped by its tolerance, not its iteration cap.
-        steps: iterations of each reweighted fit.
-        disagreement: {name: {"split", "z_shift"}} for parameters on which two halves of the data
-            (`data_splits`) disagree beyond their uncertainty: the model lacks something that moves
-            them, and their variance was widened by the disagreement (`consistent_covariance`).
-        inconsistency: {"split", "D2", "scale"} when two halves of the data cannot share one θ
-            (`consistent_covariance`): the data's information was divided by "scale"; None when they can.
-        v0_offset: (W,) start-speed corrections fitted per window, m/s (zeros where the problem
-            follows the measured speed, or a window holds no fitted sample).
-        curvature: (k, k) Gauss–Newton curvature of the fit's cost in the free coordinates, start
-            speeds held at their fit: the quadratic model `screened_sample` holds draws against.
-        part: the problem's part that was fitted ("train" or "valid").
-        residual: (W, K, C) prediction minus measurement at the fit, channel units; 0 outside
-            the fitted part.
-        jacobian: (W, K, C, k + W') its derivative by the free coordinates (in `free`'s order),
-            then by each corrected window's start speed (W' = 0 where none is corrected).
-        prior_mean: (P,) the prior's mode in logit coordinates (`prior_mean`).
+        free: names fitted (default: every parameter the channels depend on); the others stay
+            at their start and keep their prior variance.
+        part: "train" (the fit that is validated on the held-out part) or "valid" (everything).
+        noise: `ModelError` (default; re-measured after each pass) or `SensorNoise`.
+        max_steps: Levenberg–Marquardt iterations per pass.
+        width: coordinates fitted, the free ones padded to it (default: as many as are free):
+            fits with fewer free parameters then share one compilation.
     """
 
-    box: Box
-    z: np.ndarray
-    cov_z: np.ndarray
-    cov_information: np.ndarray
-    free: tuple[str, ...]
-    noise: NoiseModel
-    converged: bool
-    steps: tuple[int, ...]
-    disagreement: dict = eqx.field(default_factory=dict)
-    inconsistency: dict | None = None
-    v0_offset: np.ndarray | None = None
-    curvature: np.ndarray | None = None
-    part: Part = eqx.field(static=True, default="train")
-    residual: np.ndarray | None = None
-    jacobian: np.ndarray | None = None
-    prior_mean: np.ndarray | None = None
-
-    @property
-    def chi2_dof(self) -> float:
-        """Σ (residual/σ_sensor)² over the fitted samples per degree of freedom: the misfit
-        against sensor noise alone (≈ 1 where the model explains the drive)."""
-        n = self.noise.samples.sum() - self.jacobian.shape[-1]  # the free ones and the start speeds
-        return float(np.sum((self.residual / self.noise.sensor) ** 2) / max(1.0, n))
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return self.box.names
-
-    @property
-    def theta(self) -> np.ndarray:
-        """The best fit (MAP), in parameter units."""
-        return np.asarray(self.box.from_unbounded(self.z))
-
-    def interval(self, level: float = 0.9) -> np.ndarray:
-        """(P, 2) central `level` interval of each parameter, in parameter units: the Gaussian
-        marginal in z mapped through the box (monotone, so its quantiles map exactly)."""
-        half = norm.ppf(0.5 + level / 2) * np.sqrt(np.clip(np.diag(self.cov_z), 0.0, None))
-        ends = np.stack([self.z - half, self.z + half])
-        return np.asarray(jax.vmap(self.box.from_unbounded)(jnp.asarray(ends))).T
-
-    def sample(self, key: PRNGKeyArray, n: int, *, information_only: bool = False) -> Float[Array, "n P"]:
-        """`n` draws in parameter units (Gaussian in z, mapped into the box); with
-        `information_only`, from `cov_information` (for the identifiability rule)."""
-        return jax.vmap(self.box.from_unbounded)(self.sample_z(key, n, information_only=information_only))
-
-    def sample_z(self, key: PRNGKeyArray, n: int, *, information_only: bool = False) -> Float[Array, "n P"]:
-        """`sample`'s draws in the logit coordinates."""
-        cov = self.cov_information if information_only else self.cov_z
-        chol = np.linalg.cholesky(cov + 1e-12 * np.eye(len(self.z)))
-        eps = jax.random.normal(key, (n, len(self.z)), dtype=jnp.float32)
-        return jnp.asarray(self.z, jnp.float32) + eps @ jnp.asarray(chol.T, jnp.float32)
-
-    def predictive_draws(self, key: PRNGKeyArray, n: int) -> Float[Array, "n P"]:
-        """`n` parameter draws for predicting new driving: from the drive's information alone
-        (`cov_information`). The model error enters a prediction once, through the noise model's
-        scale added to each simulated draw; the widening by the halves' disagreement keeps the
-        parameter intervals honest, and a band that also drew from it would count that error
-        twice."""
-        return self.sample(key, n, information_only=True)
-
-    def with_fitted_starts(self, problem: Problem) -> Problem:
-        """`problem` (the fitted one, or the same windows with another held-out part) with each
-        window's start speed corrected as the fit found: the held-out part of a fitted window is
-        then predicted from the start its fitted part inferred."""
-        if self.v0_offset is None or not np.any(self.v0_offset):
-            return problem
-        if len(self.v0_offset) != len(problem.v0):
-            raise ValueError(f"{len(self.v0_offset)} fitted start speeds, {len(problem.v0)} windows")
-        return dataclasses.replace(problem, v0=np.asarray(problem.v0) + self.v0_offset)
-
-    def mahalanobis2(self, theta) -> np.ndarray:
-        """Squared Mahalanobis distance of θ (…, P) from the fit, in z (the posterior's
-        50 % region is D² ≤ χ²_P(0.5))."""
-        z = np.asarray(jax.vmap(self.box.to_unbounded)(jnp.atleast_2d(jnp.asarray(theta))))
-        d = z - self.z
-        return np.einsum("np,pq,nq->n", d, np.linalg.pinv(self.cov_z), d)
+    free: Sequence[str] | None = None
+    part: Part = "train"
+    noise: SensorNoise | ModelError = ModelError()
+    max_steps: int = 40
+    width: int | None = None
 
 
 def fit_likelihood(
     problem: Problem,
     start,
     box: Box,
+    request: FitRequest = FitRequest(),
     *,
     effects: Sequence[str] = (),
     model: AbstractVehicleModel | None = None,
-    free: Sequence[str] | None = None,
-    part: Part = "train",
-    noise: SensorNoise | ModelError = ModelError(),
-    max_steps: int = 40,
     solver: Solver = Solver(),
-    width: int | None = None,
 ) -> LikelihoodPosterior:
-    """The likelihood posterior of `problem`'s `part` samples.
+    """The likelihood posterior of `problem`'s `request.part` samples.
 
     Args:
         problem: the drive.
@@ -179,18 +88,13 @@ def fit_likelihood(
             fits best.
         box: the prior box over `parameter_names(effects)` (with `model`: over θ and its effects'
             parameters, in its effects' order).
+        request: the parameters fitted, the samples, the noise model and the iterations
+            (`FitRequest`).
         effects: enabled effects (their parameters follow θ).
         model: the model to fit (default: the one with `effects`): e.g. one holding every
             candidate effect, so that one compiled fit serves every candidate; its parameters
-            not `free` stay exactly at `start` (an effect's null values: it vanishes).
-        free: names fitted (default: every parameter the channels depend on); the others stay
-            at their start and keep their prior variance.
-        part: "train" (the fit that is validated on the held-out part) or "valid" (everything).
-        noise: `ModelError` (default; re-measured after each fit) or `SensorNoise`.
-        max_steps: Levenberg–Marquardt iterations per pass.
+            not `request.free` stay exactly at `start` (an effect's null values: it vanishes).
         solver: the simulator's solver.
-        width: coordinates fitted, the free ones padded to it (default: as many as are free):
-            fits with fewer free parameters then share one compilation.
     """
     if model is None and tuple(box.names) != parameter_names(effects):
         raise ValueError(f"box over {box.names}, parameters {parameter_names(effects)}")
@@ -202,7 +106,7 @@ def fit_likelihood(
         size = sum(len(e.param_names) for e in effects)
         if len(box.names) != len(PARAM_NAMES) + size:
             raise ValueError(f"box over {len(box.names)} parameters, the model has {size} beside θ")
-        return _fit(problem, wm, effects, start, box, _Request(free, part, noise, max_steps, width))
+        return _fit(problem, wm, effects, start, box, request)
 
 
 def _first_noise(data: Problem, mask, noise: SensorNoise | ModelError) -> tuple[np.ndarray, np.ndarray, int]:
@@ -218,67 +122,115 @@ def _first_noise(data: Problem, mask, noise: SensorNoise | ModelError) -> tuple[
     return np.asarray(first.scale, float), np.asarray(first.tau, float), noise.passes
 
 
-@dataclasses.dataclass(frozen=True)
-class _Request:
-    """What `fit_likelihood` was asked for beyond the model and the start (see its arguments)."""
-
-    free: Sequence[str] | None
-    part: Part
-    noise: SensorNoise | ModelError
-    max_steps: int
-    width: int | None
-
-
-def _fit(data: Problem, wm, effects, start, box, request: _Request):
-    free, part, noise, max_steps, width = (
-        request.free,
-        request.part,
-        request.noise,
-        request.max_steps,
-        request.width,
-    )
-    names = box.names
+def _fit(data: Problem, wm, effects, start, box: Box, request: FitRequest) -> LikelihoodPosterior:
+    """The fit's stages: the best start, the coordinates it moves, the reweighted fit, and the
+    posterior at its end."""
     # Every window, the others masked: the validation fit and the refit on all the driving then
     # share one problem shape, and so one compilation.
-    mask = np.asarray(data.part(part))
-    box64 = Box(jnp.asarray(box.low, jnp.float64), jnp.asarray(box.high, jnp.float64), names)
-    sensor = np.asarray(data.sigma, float)
-    scale, tau, passes = _first_noise(data, mask, noise)
+    mask = np.asarray(data.part(request.part))
+    box64 = Box(jnp.asarray(box.low, jnp.float64), jnp.asarray(box.high, jnp.float64), box.names)
+    scale, tau, passes = _first_noise(data, mask, request.noise)
     starts = np.atleast_2d(np.asarray(start, float))
     start = _best_start(wm, data, mask, starts, effects, scale)
     z0 = np.asarray(box64.to_unbounded(start, edge=1e-4))
+    layout = _layout(wm, data, box64, z0, effects, request, batch=len(starts))
+    mean = prior_mean(box, wm.model.effects)
+    coords = _Coordinates(
+        box64, jnp.asarray(z0), jnp.asarray(start, jnp.float64), jnp.asarray(layout.padded), effects
+    )
+    fit = _fitter(wm, data, mask, coords, layout.extended(mean[layout.idx]), request.max_steps)
+    first = _Noise(scale, tau, steps=())
+    sensor_only = isinstance(request.noise, SensorNoise)
+    res, noise = _reweighted(fit, layout.extended(z0[layout.idx]), data, mask, first, passes, sensor_only)
+    if res is None:
+        # The start itself does not simulate: an infinitely bad fit, said as such.
+        return _failed(data, box, z0, layout.free, request.part, noise.model(data, mask), mean, noise.steps)
+    return _posterior(data, box, mask, z0, layout, res, noise, mean, request.part)
+
+
+class _Layout(NamedTuple):
+    """The fitted coordinates: the `free` names at box indices `idx`, padded past the box's end
+    to `width` (`padded`), then one start-speed correction per corrected window (`windows`)."""
+
+    free: tuple[str, ...]
+    idx: np.ndarray
+    padded: np.ndarray
+    width: int
+    windows: int
+
+    def extended(self, values: np.ndarray) -> np.ndarray:
+        """`values` of the free coordinates, zeros in the padding and the start speeds."""
+        return np.concatenate([values, np.zeros(self.width - len(self.idx) + self.windows)])
+
+
+def _layout(wm, data: Problem, box: Box, z0: np.ndarray, effects, request: FitRequest, batch: int) -> _Layout:
+    """The coordinates the fit moves: `request.free` (default: those the channels depend on at
+    z0) in the box's order, padded to `request.width`, and the corrected windows' start speeds."""
+    free = request.free
     if free is None:
-        free = _informed(wm, data, box64, z0, effects, batch=len(starts))
+        free = _informed(wm, data, box, z0, effects, batch=batch)
+    names = box.names
     free = tuple(n for n in names if n in free)
     idx = np.asarray([names.index(n) for n in free], dtype=int)
     k = len(idx)
-    kw = k if width is None else max(int(width), k)
+    width = k if request.width is None else max(int(request.width), k)
     # Padding slots index past the end: nothing reads them, their prior holds them at 0.
-    padded = np.concatenate([idx, np.full(kw - k, len(names))]).astype(int)
-    n_v = corrected_windows(data)
-    mean = prior_mean(box, wm.model.effects)
-    p_mean = np.concatenate([mean[idx], np.zeros(kw - k + n_v)])
-    coords = _Coordinates(
-        box64, jnp.asarray(z0), jnp.asarray(start, jnp.float64), jnp.asarray(padded), effects
-    )
-    fit = _fitter(wm, data, mask, coords, p_mean, max_steps)
-    p, steps = jnp.asarray(np.concatenate([z0[idx], np.zeros(kw - k + n_v)])), []
-    sensor_only = isinstance(noise, SensorNoise)
-    # The noise model as it stands (scale and τ are re-measured after each pass).
-    noise_model = lambda: NoiseModel(data.channels, scale, tau, sensor, mask.sum() * np.ones_like(scale))
+    padded = np.concatenate([idx, np.full(width - k, len(names))]).astype(int)
+    return _Layout(free, idx, padded, width, corrected_windows(data))
+
+
+class _Noise(NamedTuple):
+    """The noise model as it stands (scale and τ are re-measured after each pass), and the
+    iterations each pass took."""
+
+    scale: np.ndarray
+    tau: np.ndarray
+    steps: tuple[int, ...]
+
+    def model(self, data: Problem, mask) -> NoiseModel:
+        sensor = np.asarray(data.sigma, float)
+        return NoiseModel(data.channels, self.scale, self.tau, sensor, mask.sum() * np.ones_like(self.scale))
+
+
+def _reweighted(fit, p, data: Problem, mask, noise: _Noise, passes: int, sensor_only: bool):
+    """`passes + 1` fits from `p`, each weighted by the noise the previous one left (with
+    `SensorNoise`, the sensor's, unchanged). Returns the last fit's result (None if a fit cost
+    is not finite: its start does not simulate) and the noise model it ends with."""
+    sensor = np.asarray(data.sigma, float)
+    scale, tau, steps = noise
+    p = jnp.asarray(p)
     for _ in range(passes + 1):
         std = scale * np.sqrt(tau)
         res = fit(p, jnp.asarray(std))
-        p, converged = res.z, bool(res.converged)
-        steps.append(int(res.num_steps))
+        p = res.z
+        steps = (*steps, int(res.num_steps))
         if not np.isfinite(float(res.cost)):
-            # The start itself does not simulate: an infinitely bad fit, said as such.
-            return _failed(data, box, z0, free, part, noise_model(), mean, steps)
+            return None, _Noise(scale, tau, steps)
         resid = np.asarray(res.residual).reshape(*mask.shape, len(scale)) * std
         if not sensor_only:
             measured = measure_noise(resid, mask, sensor, data.channels)
             scale, tau = measured.scale, measured.tau
-    p = np.asarray(p)
+    return _Pass(res, std, resid), _Noise(scale, tau, steps)
+
+
+class _Pass(NamedTuple):
+    """The last pass: its solver result, the per-channel stds it was weighted by, and its
+    residual in channel units."""
+
+    result: Any
+    std: np.ndarray
+    residual: np.ndarray
+
+
+def _posterior(
+    data: Problem, box: Box, mask, z0, layout: _Layout, last: _Pass, noise: _Noise, mean, part: Part
+) -> LikelihoodPosterior:
+    """The posterior at the last pass's fit: its covariances with the final noise model, the
+    parameters not fitted at their start and prior variance."""
+    res, std, resid = last
+    scale, tau = noise.scale, noise.tau
+    idx, k, kw, n_v = layout.idx, len(layout.idx), layout.width, layout.windows
+    p = np.asarray(res.z)
     z, v0_offset = p[:k], p[kw:] if n_v else np.zeros(len(data.v0))
     raw = np.asarray(res.jacobian).reshape(*mask.shape, len(scale), kw + n_v)
     raw = np.concatenate([raw[..., :k], raw[..., kw:]], axis=-1)
@@ -286,21 +238,22 @@ def _fit(data: Problem, wm, effects, start, box, request: _Request):
     cov_free, informed, shifts, joint, curvature = _covariances(
         data, mask, jac, resid / scale, z - mean[idx], tau
     )
+    names = box.names
     cov, cov_info = (np.diag(np.full(len(names), PRIOR_Z_STD**2)) for _ in range(2))
     cov[np.ix_(idx, idx)] = cov_free
     cov_info[np.ix_(idx, idx)] = informed
     z_all = z0.copy()
     z_all[idx] = z
-    disagree = {free[i]: v for i, v in shifts.items()}
+    disagree = {layout.free[i]: v for i, v in shifts.items()}
     return LikelihoodPosterior(
         box,
         z_all,
         cov,
         cov_info,
-        free,
-        noise_model(),
-        converged,
-        tuple(steps),
+        layout.free,
+        noise.model(data, mask),
+        bool(res.converged),
+        noise.steps,
         disagree,
         joint,
         v0_offset,

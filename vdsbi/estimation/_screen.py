@@ -22,7 +22,8 @@ from scipy.stats import chi2
 
 from ..problem import CLEAN_BATCH, Problem, simulate_draws, split_parameters, windowed_model
 from ..simulator.solvers import Solver
-from ._likelihood import PRIOR_Z_STD, LikelihoodPosterior
+from ._laplace_posterior import LikelihoodPosterior
+from ._likelihood import PRIOR_Z_STD
 
 #: A draw goes when its cost exceeds the quadratic model by more than ½·χ²_k at this level.
 LEVEL = 0.99

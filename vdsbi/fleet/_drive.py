@@ -34,7 +34,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from ..estimation import PRIOR_Z_STD, ModelError, fit_likelihood
+from ..estimation import PRIOR_Z_STD, FitRequest, ModelError, fit_likelihood
 from ..io import InputError, write_text_atomically
 from ..runtime import release_compiled_programs
 from ._amortized import PlatformEstimator, Proposal, drive_proposal
@@ -213,10 +213,8 @@ def _answer(key, drive, prepared, folder, escalation, draws_per_window, stages) 
             problem,
             start,
             box,
+            FitRequest(free=free, noise=ModelError(start=noise, passes=0), width=len(free)),
             effects=effects,
-            free=free,
-            noise=ModelError(start=noise, passes=0),
-            width=len(free),
         )
         check = _timed(
             stages,
