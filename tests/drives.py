@@ -1,7 +1,9 @@
-"""Simulated drives written as recording files, for the tests that run commands on files."""
+"""Simulated drives written as recording files, for the tests that run commands on files, and
+the fleet's one-drive setup its per-drive tests share."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import jax
@@ -48,3 +50,35 @@ def drive_csv(
         df[c] = np.asarray(ys)[:, CHANNELS.index(c)] + rng.normal(0.0, s, len(df))
     df.to_csv(path, index=False)
     return path
+
+
+def fleet_drive(folder: Path, seconds: float) -> tuple[Path, Path, dict]:
+    """A simulated fleet of one car and one drive of `seconds` in `folder`: the drive's recording,
+    its vehicle file and its true values."""
+    from vdsbi.fleet import simulated_fleet
+
+    manifest = simulated_fleet(folder, cars=1, drives=1, duration=seconds, changes=(), seed=2)
+    root = manifest.parent
+    truth = json.loads((root / "truth.json").read_text())["car01/drive0.csv"]["values"]
+    return root / "car01" / "drive0.csv", root / "vehicle.json", truth
+
+
+def crude_proposal(box, truth: dict):
+    """A Gaussian 1.5 prior std off the truth in every coordinate: its check fails, a fit follows."""
+    from vdsbi.estimation import PRIOR_Z_STD
+    from vdsbi.fleet._amortized import Proposal
+
+    centre = np.asarray(box.to_unbounded(np.asarray([truth.get(n, np.nan) for n in box.names])), float)
+    centre = np.where(np.isfinite(centre), centre, 0.0) + 1.5 * PRIOR_Z_STD * np.where(centre > 0, -1, 1)
+    return Proposal(centre, np.eye(box.dim) * (0.5 * PRIOR_Z_STD) ** 2, 1)
+
+
+def answer_crude(recording: Path, vehicle: Path, platform, truth: dict, tmp_path: Path, monkeypatch):
+    """The fleet's answer for one drive whose amortized posterior is `crude_proposal`."""
+    from vdsbi.fleet import _drive
+
+    monkeypatch.setattr(_drive, "_estimator", lambda *a: None)
+    monkeypatch.setattr(_drive, "drive_proposal", lambda *a: crude_proposal(platform.box, truth))
+    drive = type("Drive", (), {"recording": recording, "vehicle": vehicle})()
+    where = (platform, tmp_path, None)
+    return _drive._answer(jax.random.key(0), drive, where, tmp_path / "out", _drive.Escalation(), 10, {})

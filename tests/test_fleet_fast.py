@@ -2,12 +2,9 @@
 and the shortcuts (the window ladder, the smaller amortized check, the fit without the parameters
 the model has no use for) answer as the longer path does."""
 
-import json
-
-import numpy as np
 import pytest
+from drives import answer_crude, fleet_drive
 
-from vdsbi.fleet import simulated_fleet
 from vdsbi.fleet._shape import LENGTH_FRACTIONS, WINDOW_COUNTS, fixed_shape, length_bucket, window_bucket
 
 
@@ -39,41 +36,13 @@ def _drives(tmp_path, durations):
     """One simulated drive per duration (one car each), their truths, and the platform of them."""
     from vdsbi.fleet._platform import drive_problem, make_platform
 
-    out = []
-    for i, seconds in enumerate(durations):
-        manifest = simulated_fleet(
-            tmp_path / f"fleet{i}", cars=1, drives=1, duration=seconds, changes=(), seed=2
-        )
-        folder = manifest.parent
-        recording, vehicle = folder / "car01" / "drive0.csv", folder / "vehicle.json"
-        truth = json.loads((folder / "truth.json").read_text())["car01/drive0.csv"]["values"]
-        out.append((recording, vehicle, truth))
+    out = [fleet_drive(tmp_path / f"fleet{i}", seconds) for i, seconds in enumerate(durations)]
     platform = make_platform(out[0][1], [drive_problem(r, v) for r, v, _ in out])
     return out, platform
 
 
-def _crude(box, truth):
-    """A Gaussian 1.5 prior std off the truth in every coordinate: its check fails, a fit follows."""
-    from vdsbi.estimation import PRIOR_Z_STD
-    from vdsbi.fleet._amortized import Proposal
-
-    centre = np.asarray(box.to_unbounded(np.asarray([truth.get(n, np.nan) for n in box.names])), float)
-    centre = np.where(np.isfinite(centre), centre, 0.0) + 1.5 * PRIOR_Z_STD * np.where(centre > 0, -1, 1)
-    return Proposal(centre, np.eye(box.dim) * (0.5 * PRIOR_Z_STD) ** 2, 1)
-
-
 def _answer(drive, platform, truth, tmp_path, monkeypatch):
-    import jax
-
-    from vdsbi.fleet import _drive
-
-    monkeypatch.setattr(_drive, "_estimator", lambda *a: None)
-    monkeypatch.setattr(_drive, "drive_proposal", lambda *a: _crude(platform.box, truth))
-    recording, vehicle = drive
-    d = type("Drive", (), {"recording": recording, "vehicle": vehicle})()
-    return _drive._answer(
-        jax.random.key(0), d, (platform, tmp_path, None), tmp_path / "out", _drive.Escalation(), 10, {}
-    )
+    return answer_crude(*drive, platform, truth, tmp_path, monkeypatch)
 
 
 @pytest.mark.slow

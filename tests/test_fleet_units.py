@@ -5,9 +5,9 @@ import time
 
 import numpy as np
 import pytest
+from drives import answer_crude, fleet_drive
 
 from vdsbi.cli import main
-from vdsbi.fleet import simulated_fleet
 from vdsbi.fleet._changes import detect_changes
 from vdsbi.fleet._manifest import read_manifest
 from vdsbi.fleet._psis import gpd_fit, psis
@@ -197,38 +197,14 @@ def test_a_crude_proposal_is_answered_by_the_fit_its_check_starts(tmp_path, monk
     std off, in every coordinate): its check fails, the fit starts from the check's best point with
     its noise, and a fit's Laplace posterior (the first's, or its reweighted refit's) passes the
     check; the answer's estimates lie within 4 posterior std of the truth."""
-    import json
-
-    import jax
-
-    from vdsbi.estimation import PRIOR_Z_STD
     from vdsbi.fleet import _drive
-    from vdsbi.fleet._amortized import Proposal
     from vdsbi.fleet._check import DRAWS, k_threshold
     from vdsbi.fleet._platform import drive_problem, make_platform
 
-    manifest = simulated_fleet(tmp_path / "fleet", cars=1, drives=1, duration=20.0, changes=(), seed=2)
-    folder = manifest.parent
-    recording, vehicle = folder / "car01" / "drive0.csv", folder / "vehicle.json"
-    truth = json.loads((folder / "truth.json").read_text())["car01/drive0.csv"]["values"]
+    recording, vehicle, truth = fleet_drive(tmp_path / "fleet", 20.0)
     platform = make_platform(vehicle, [drive_problem(recording, vehicle)])
     box = platform.box
-    centre = np.asarray(box.to_unbounded(np.asarray([truth.get(n, np.nan) for n in box.names])), float)
-    centre = np.where(np.isfinite(centre), centre, 0.0) + 1.5 * PRIOR_Z_STD * np.where(centre > 0, -1, 1)
-    crude = Proposal(centre, np.eye(box.dim) * (0.5 * PRIOR_Z_STD) ** 2, 1)
-    monkeypatch.setattr(_drive, "_estimator", lambda *a: None)
-    monkeypatch.setattr(_drive, "drive_proposal", lambda *a: crude)
-    drive = type("Drive", (), {"recording": recording, "vehicle": vehicle})()
-    stages = {}
-    record = _drive._answer(
-        jax.random.key(0),
-        drive,
-        (platform, tmp_path, None),
-        tmp_path / "out",
-        _drive.Escalation(),
-        10,
-        stages,
-    )
+    record = answer_crude(recording, vehicle, platform, truth, tmp_path, monkeypatch)
     assert record["method"] == "amortized+fit", record.get("escalated_because")
     # Each check failed but the last, a fit's: the amortized one, then a fit's, then its refit's.
     names, ks = list(record["checks"]), [c["k_hat"] for c in record["checks"].values()]
