@@ -145,7 +145,7 @@ def _fit(data: Problem, wm, effects, start, box: Box, request: FitRequest) -> Li
     if res is None:
         # The start itself does not simulate: an infinitely bad fit, said as such.
         return _failed(data, box, z0, layout.free, request.part, noise.model(data, mask), mean, noise.steps)
-    return _posterior(data, box, mask, z0, layout, res, noise, mean, request.part)
+    return _posterior(data, box, z0, layout, res, noise, mean, request.part)
 
 
 class _Layout(NamedTuple):
@@ -223,10 +223,11 @@ class _Pass(NamedTuple):
 
 
 def _posterior(
-    data: Problem, box: Box, mask, z0, layout: _Layout, last: _Pass, noise: _Noise, mean, part: Part
+    data: Problem, box: Box, z0, layout: _Layout, last: _Pass, noise: _Noise, mean, part: Part
 ) -> LikelihoodPosterior:
     """The posterior at the last pass's fit: its covariances with the final noise model, the
     parameters not fitted at their start and prior variance."""
+    mask = np.asarray(data.part(part))
     res, std, resid = last
     scale, tau = noise.scale, noise.tau
     idx, k, kw, n_v = layout.idx, len(layout.idx), layout.width, layout.windows
