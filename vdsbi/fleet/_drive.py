@@ -164,21 +164,12 @@ def _timed(stages: dict, name: str, fn, *args, **kwargs):
 
 
 def _answer(key, drive, prepared, folder, escalation, draws_per_window, stages) -> dict:
+    """The drive's record from the first level whose check passes (module docstring)."""
     platform, est_folder, no_estimator = prepared
     k_prop, k_check, k_fit_check = jax.random.split(key, 3)
-    why = no_estimator
-    problem = None
-    if why is None:
-        problem = _timed(stages, "problem", drive_problem, drive.recording, drive.vehicle)
-        why = platform.fits(problem)
-    if why is None:
-        try:
-            problem = fixed_shape(problem, length_bucket(problem, WINDOW_SECONDS))
-        except InputError as err:
-            why = err.detail
+    problem, why = _shaped_problem(drive, platform, no_estimator, stages)
     if why is not None:
         return _identify(drive, platform, folder, escalation, why, stages, problem)
-    box, effects = platform.box, platform.effects
     estimator = _timed(stages, "load", _estimator, est_folder, platform)
     x, has = drive_x(problem)
     try:
@@ -191,52 +182,70 @@ def _answer(key, drive, prepared, folder, escalation, draws_per_window, stages) 
         importance_check,
         k_check,
         problem,
-        box,
-        effects,
+        platform.box,
+        platform.effects,
         proposal,
         spread=AMORTIZED_SPREAD,
         draws=AMORTIZED_DRAWS,
     )
     checks = {"amortized": _check_record(check)}
     if check.passed:
-        return _checked("amortized", check, box, checks)
+        return _checked("amortized", check, platform.box, checks)
+    check = _fits(k_fit_check, problem, platform, check, checks, stages)
+    if check.passed:
+        return _checked("amortized+fit", check, platform.box, checks)
+    why = (
+        f"importance check failed after the fit: k̂ {check.k_hat:.2f} > {k_threshold(len(check.weights)):.2f}"
+    )
+    return _identify(drive, platform, folder, escalation, why, stages, problem) | {"checks": checks}
+
+
+def _shaped_problem(drive, platform, no_estimator, stages) -> tuple:
+    """(the drive's problem at the estimator's fixed shape, None), or (the problem or None, why
+    the amortized path cannot take it)."""
+    if no_estimator is not None:
+        return None, no_estimator
+    problem = _timed(stages, "problem", drive_problem, drive.recording, drive.vehicle)
+    why = platform.fits(problem)
+    if why is not None:
+        return problem, why
+    try:
+        return fixed_shape(problem, length_bucket(problem, WINDOW_SECONDS)), None
+    except InputError as err:
+        return problem, err.detail
+
+
+def _fits(key, problem, platform, check: CheckResult, checks: dict, stages) -> CheckResult:
+    """Likelihood fits from the amortized check's best point, each checked, until one passes or
+    `FITS` are spent (each check's record added to `checks`); the last check."""
     start, noise = check.best, check.noise
     # Every parameter the model can feel (one the channels do not depend on has a zero Jacobian
     # column and keeps the prior; one the fit's path makes informative is fitted, where probes at
     # one point would miss it): the same set, and so one compiled fit, for every drive.
     free = fitted_parameters(platform)
     for attempt in range(FITS):
+        request = FitRequest(free=free, noise=ModelError(start=noise, passes=0), width=len(free))
         fit = _timed(
-            stages,
-            "fit",
-            fit_likelihood,
-            problem,
-            start,
-            box,
-            FitRequest(free=free, noise=ModelError(start=noise, passes=0), width=len(free)),
-            effects=effects,
+            stages, "fit", fit_likelihood, problem, start, platform.box, request, effects=platform.effects
         )
         check = _timed(
             stages,
             "check",
             importance_check,
-            jax.random.fold_in(k_fit_check, attempt),
+            jax.random.fold_in(key, attempt),
             problem,
-            box,
-            effects,
-            _laplace(fit, box),
+            platform.box,
+            platform.effects,
+            _laplace(fit, platform.box),
             spread=FIT_SPREAD,
             noise=fit.noise,
         )
         checks["fit" if attempt == 0 else f"fit{attempt + 1}"] = _check_record(check)
         if check.passed:
-            return _checked("amortized+fit", check, box, checks)
+            break
         # The next fit from this one, weighted by the noise measured at it (a reweighting pass).
         start, noise = fit.theta, fit.noise
-    why = (
-        f"importance check failed after the fit: k̂ {check.k_hat:.2f} > {k_threshold(len(check.weights)):.2f}"
-    )
-    return _identify(drive, platform, folder, escalation, why, stages, problem) | {"checks": checks}
+    return check
 
 
 #: Parameters a model driven by the measured speed has no use for: its tyres roll freely, so
