@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from vdsbi.estimation import FitRequest, ModelError, fit_likelihood
-from vdsbi.estimation._likelihood import prior_mean
+from vdsbi.estimation._start import prior_mean
 from vdsbi.io import build_recording
 from vdsbi.problem import Box, ProblemSettings, make_problem, prior_box, simulate_draws, windowed_model
 from vdsbi.problem.validation import channel_scores
@@ -205,7 +205,7 @@ def test_the_parameters_a_drive_informs_are_those_its_channels_depend_on(x64):
     import jax
     import jax.numpy as jnp
 
-    from vdsbi.estimation._likelihood import _informed
+    from vdsbi.estimation._start import informed_parameters
     from vdsbi.problem import split_parameters, windowed_model
 
     veh = default_vehicle()
@@ -219,7 +219,7 @@ def test_the_parameters_a_drive_informs_are_those_its_channels_depend_on(x64):
         jac = jax.jacfwd(compared)(jnp.asarray(z0))
         jac = np.where(np.asarray(prob.valid)[..., None, None], np.asarray(jac), 0.0)
         depends = {n for n, col in zip(PARAM_NAMES, np.moveaxis(jac, -1, 0)) if np.any(col != 0.0)}
-        assert set(_informed(wm, prob, box, z0, (), batch=4)) == depends, mode
+        assert set(informed_parameters(wm, prob, box, z0, (), batch=4)) == depends, mode
         assert ("C_kappa_f" in depends) == (mode == "torque"), mode
 
 
