@@ -37,10 +37,7 @@ def _estimator(key, prior, theta_map, ode_steps=16):
         prior,
         IdentityEmbedding(1),
         (1,),
-        hidden=16,
-        num_blocks=2,
-        ode_steps=ode_steps,
-        theta_map=theta_map,
+        FlowMatchingSettings(hidden=16, num_blocks=2, ode_steps=ode_steps, theta_map=theta_map),
     )
     return _perturbed(est, k2, 0.3)
 

@@ -47,10 +47,7 @@ def _make(key, prior, embedding, x_shape, settings, theta_standardizer, x_standa
             prior,
             embedding,
             x_shape,
-            hidden=settings.hidden,
-            num_blocks=settings.num_blocks,
-            ode_steps=settings.ode_steps,
-            theta_map=settings.theta_map,
+            settings,
             theta_standardizer=theta_standardizer,
             x_standardizer=x_standardizer,
         )

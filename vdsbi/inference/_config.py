@@ -59,14 +59,18 @@ class FlowMatchingSettings:
     amortised NPE (``rounds=1``) or TSNPE (``truncate=True``) only.
 
     Attributes:
-        hidden, num_blocks: width and residual blocks of the vector field.
+        hidden, num_blocks, num_freqs: width, residual blocks and time frequencies of the vector
+            field.
         ode_steps: fixed Tsit5 steps of the ODE (sampling and ``log_prob``).
+        sigma_min: width of the conditional path at ``t = 1``.
         theta_map, x_standardize: as for `SplineFlowSettings`.
     """
 
     hidden: int = 128
     num_blocks: int = 3
+    num_freqs: int = 4
     ode_steps: int = 10
+    sigma_min: float = 1e-4
     theta_map: AbstractThetaMap = LogitMap()
     x_standardize: AbstractStandardization = ChannelStandardization()
 

@@ -24,12 +24,13 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from ._config import FlowMatchingSettings
 from ._embeddings import AbstractEmbedding
 from ._estimator import AbstractEstimator, skeleton_parts
 from ._loss import AbstractLoss
 from ._prior import BoxPrior
 from ._standardize import Standardizer
-from ._theta_map import AbstractThetaMap, LogitMap, theta_map_from_name
+from ._theta_map import AbstractThetaMap, theta_map_from_name
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -109,10 +110,9 @@ class FlowMatchingEstimator(AbstractEstimator):
         prior: a :class:`BoxPrior`; fixes ``dim`` and the box map.
         embedding: maps one standardised x to a context vector of length ``embedding.out_dim``.
         x_shape: shape of ONE observation.
-        hidden, num_blocks, num_freqs: vector-field width, residual blocks, time frequencies.
-        ode_steps: fixed Tsit5 steps over ``t ∈ [0, 1]`` for sampling and ``log_prob``.
-        sigma_min: width of the conditional path at ``t = 1``.
-        theta_map: `LogitMap` or `IdentityMap`, as for `ConditionalFlow`.
+        architecture: the vector field, the ODE's steps, the path's width and the θ map
+            (`FlowMatchingSettings`; its ``x_standardize`` is not read here: ``x_standardizer`` is
+            the fit).
         theta_standardizer: affine map in the unbounded (logit, or θ) space, shape ``(d,)``.
         x_standardizer: applied to x before the embedding.
     """
@@ -137,21 +137,17 @@ class FlowMatchingEstimator(AbstractEstimator):
         prior: BoxPrior,
         embedding: AbstractEmbedding,
         x_shape: tuple[int, ...],
+        architecture: FlowMatchingSettings = FlowMatchingSettings(),
         *,
-        hidden: int = 128,
-        num_blocks: int = 3,
-        num_freqs: int = 4,
-        ode_steps: int = 10,
-        sigma_min: float = 1e-4,
-        theta_map: AbstractThetaMap = LogitMap(),
         theta_standardizer: Standardizer | None = None,
         x_standardizer: Standardizer | None = None,
     ):
+        a = architecture
         self.dim = prior.dim
         self.x_shape = tuple(int(s) for s in x_shape)
-        self.hidden, self.num_blocks, self.num_freqs = int(hidden), int(num_blocks), int(num_freqs)
-        self.ode_steps, self.sigma_min = int(ode_steps), float(sigma_min)
-        self.theta_map = theta_map
+        self.hidden, self.num_blocks, self.num_freqs = int(a.hidden), int(a.num_blocks), int(a.num_freqs)
+        self.ode_steps, self.sigma_min = int(a.ode_steps), float(a.sigma_min)
+        self.theta_map = a.theta_map
         self.prior = prior
         self.embedding = embedding
         self.theta_standardizer = theta_standardizer or Standardizer.identity(self.dim)
@@ -239,12 +235,14 @@ def fmpe_from_spec(spec: dict[str, Any]) -> FlowMatchingEstimator:
         prior,
         embedding,
         x_shape,
-        hidden=spec["hidden"],
-        num_blocks=spec["num_blocks"],
-        num_freqs=spec["num_freqs"],
-        ode_steps=spec["ode_steps"],
-        sigma_min=spec["sigma_min"],
-        theta_map=theta_map_from_name(spec["theta_map"]),
+        FlowMatchingSettings(
+            hidden=spec["hidden"],
+            num_blocks=spec["num_blocks"],
+            num_freqs=spec["num_freqs"],
+            ode_steps=spec["ode_steps"],
+            sigma_min=spec["sigma_min"],
+            theta_map=theta_map_from_name(spec["theta_map"]),
+        ),
         x_standardizer=xstd,
     )
 
