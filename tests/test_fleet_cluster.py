@@ -35,8 +35,18 @@ QUICK = FleetSettings(
         draws_per_window=200,
     ),
     escalation=Escalation(rounds=1, sims=100, epochs=2, ppc_draws=10),
+    # The platform's diagnosis only has to run and be linked here (test_fleet_misfit checks what it
+    # names): a small null sample, no term search, no figures.
     misfit=MisfitSettings(
-        most_cars=2, options=(("candidates", ("sensor_bias",)), ("max_effects", 1), ("final_dt", 0.005))
+        most_cars=2,
+        options=(
+            ("candidates", ("sensor_bias",)),
+            ("max_effects", 1),
+            ("final_dt", 0.005),
+            ("num_draws", 50),
+            ("max_terms", 0),
+            ("plots", False),
+        ),
     ),
 )
 

@@ -5,6 +5,7 @@ diagnoses it when a drive hides it, and exports it."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -84,7 +85,13 @@ def test_one_new_module_is_simulated_identified_diagnosed_and_exported(tmp_path)
     (package / "simulator" / "_effects" / "_tow_pull.py").write_text(TOY_EFFECT)
     run = subprocess.run(
         [sys.executable, "-c", SCRIPT, str(tmp_path)],
-        env={"PYTHONPATH": str(tmp_path / "src"), "PATH": "/usr/bin:/bin", "JAX_PLATFORMS": "cpu"},
+        # the suite's compiler flags (conftest): the copy compiles as cheaply as the tests do
+        env={
+            "PYTHONPATH": str(tmp_path / "src"),
+            "PATH": "/usr/bin:/bin",
+            "JAX_PLATFORMS": "cpu",
+            "XLA_FLAGS": os.environ["XLA_FLAGS"],
+        },
         cwd=tmp_path,  # `-c` puts the working directory first on the path
         capture_output=True,
         text=True,
