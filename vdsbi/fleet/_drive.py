@@ -13,12 +13,11 @@ Levels (the `method` of estimates.csv):
   for `predict` and `export`.
 
 The amortized check's simulations also serve the fit: its best point is the fit's start and the
-noise measured there weighs the fit's first pass, so the fit simulates no candidates of its own.
-The fit then re-measures the noise at its optimum and refits once (`FIT_PASSES`): the check's
-likelihood has the noise measured at the fit, so the Laplace proposal is that of the likelihood it
-is checked against. A fit short of the optimum is corrected by the importance weights, and k̂ says
-when it cannot be; a failed check is followed by a further fit from that one (checked again), up
-to `FITS` fits, before `identify`.
+noise measured there weighs the fit's channels, so the fit simulates no candidates of its own. A
+fit only places the next check's proposal: that check's likelihood has the noise re-measured at
+the fit, so a fit short of the reweighted optimum is corrected by the importance weights, and k̂
+says when it cannot be. Each fit is therefore one pass, checked; a failed check is followed by a
+reweighting pass from that fit (checked again), up to `FITS` fits, before `identify`.
 """
 
 from __future__ import annotations
@@ -54,8 +53,6 @@ AMORTIZED_SPREAD, FIT_SPREAD = 1.5, 1.2
 AMORTIZED_DRAWS = 64
 #: Fits tried before `identify`, each from the last with the noise re-measured at it, each checked.
 FITS = 2
-#: Re-measurements of the noise within a fit: one, so the fit's weights are those of its check.
-FIT_PASSES = 1
 
 
 @dataclasses.dataclass(frozen=True)
@@ -227,7 +224,7 @@ def _fits(key, problem, platform, check: CheckResult, checks: dict, stages) -> C
     # one point would miss it): the same set, and so one compiled fit, for every drive.
     free = fitted_parameters(platform)
     for attempt in range(FITS):
-        request = FitRequest(free=free, noise=ModelError(start=noise, passes=FIT_PASSES), width=len(free))
+        request = FitRequest(free=free, noise=ModelError(start=noise, passes=0), width=len(free))
         fit = _timed(
             stages, "fit", fit_likelihood, problem, start, platform.box, request, effects=platform.effects
         )
@@ -246,7 +243,7 @@ def _fits(key, problem, platform, check: CheckResult, checks: dict, stages) -> C
         checks["fit" if attempt == 0 else f"fit{attempt + 1}"] = _check_record(check)
         if check.passed:
             break
-        # The next fit from this one, weighted by the noise measured at it.
+        # The next fit from this one, weighted by the noise measured at it (a reweighting pass).
         start, noise = fit.theta, fit.noise
     return check
 
