@@ -1,7 +1,9 @@
 """A recording becomes one problem: windows, held-out part, noise, initial states, validation."""
 
 import dataclasses
+import logging
 
+import jax
 import numpy as np
 import pytest
 
@@ -241,3 +243,27 @@ def test_a_steer_zero_off_the_straight_ahead_shows_as_yaw_at_zero_steer(x64):
     _, share = yaw_at_zero_steer(problem(acting))
     assert abs(share) < 0.05
     assert "steer_offset" not in named(problem(acting))
+
+
+def test_a_new_recording_length_compiles_the_measured_filter_as_one_program(long_drive, caplog):
+    """Each fleet drive has its own length: the measurement's filter and decimation must not
+    compile op by op for each (a third of a second per drive)."""
+    rec, vehicle = long_drive
+
+    def cut(n):
+        return dataclasses.replace(
+            rec,
+            t=rec.t[:n],
+            steer=rec.steer[:n],
+            torque_front=rec.torque_front[:n],
+            torque_rear=rec.torque_rear[:n],
+            channels={c: v[:n] for c, v in rec.channels.items()},
+        )
+
+    speed = ProblemSettings(longitudinal="speed")  # filtered and decimated
+    assert make_problem(cut(6000), vehicle, speed).decimator is not None
+    with jax.log_compiles(), caplog.at_level(logging.WARNING):
+        make_problem(cut(6100), vehicle, speed)
+    compiled = [r.getMessage() for r in caplog.records if r.getMessage().startswith("Compiling")]
+    filters = [m for m in compiled if "_filtered" in m or "conv_general_dilated" in m]
+    assert len(filters) == 1 and "jit(_filtered)" in filters[0], compiled

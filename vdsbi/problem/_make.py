@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -152,7 +153,14 @@ def _compared(rec, channels, idx, n_max, decimator):
     y = np.stack(ys)
     if decimator is None:
         return y
-    return np.asarray(jax.vmap(decimator)(jnp.asarray(y)))
+    return np.asarray(_filtered(decimator, jnp.asarray(y)))
+
+
+@eqx.filter_jit
+def _filtered(decimator: Decimator, y):
+    # One program per shape: run eagerly, the filter's dozen operations would each compile for
+    # every new recording length (a third of a second per drive in a fleet).
+    return jax.vmap(decimator)(y)
 
 
 def _masks(windows, t_out, lengths, dt, burn_in):
