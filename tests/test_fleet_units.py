@@ -217,6 +217,13 @@ def test_a_crude_proposal_is_answered_by_the_fit_its_check_starts(tmp_path, monk
     for name in scored:
         q = record["parameters"][name]
         assert abs(q["mean"] - truth[name]) < 4 * q["std"], (name, q, truth[name])
+    # The answer's weighted draws are kept beside it: their weighted means are the record's.
+    saved = np.load(tmp_path / "out" / _drive.DRAWS_FILE)
+    assert list(saved["names"]) == list(box.names) and np.isclose(saved["weights"].sum(), 1.0)
+    means = saved["weights"] @ saved["theta"]
+    for j, name in enumerate(box.names):
+        assert np.isclose(means[j], record["parameters"][name]["mean"], rtol=1e-6), name
+    assert list(saved["channels"]) == list(platform.channels) and np.all(saved["noise_scale"] > 0)
 
 
 def test_a_drive_line_shows_the_k_hat_of_its_last_check():

@@ -35,7 +35,7 @@ import jax
 import numpy as np
 
 from ..estimation import PRIOR_Z_STD, FitRequest, ModelError, fit_likelihood
-from ..io import InputError, write_text_atomically
+from ..io import InputError, write_atomically, write_text_atomically
 from ..runtime import release_compiled_programs
 from ._amortized import PlatformEstimator, Proposal, drive_proposal
 from ._check import CheckResult, importance_check, k_threshold, weighted_summary
@@ -190,10 +190,10 @@ def _answer(key, drive, prepared, folder, escalation, draws_per_window, stages) 
     )
     checks = {"amortized": _check_record(check)}
     if check.passed:
-        return _checked("amortized", check, platform.box, checks)
+        return _checked("amortized", check, platform.box, checks, folder)
     check = _fits(k_fit_check, problem, platform, check, checks, stages)
     if check.passed:
-        return _checked("amortized+fit", check, platform.box, checks)
+        return _checked("amortized+fit", check, platform.box, checks, folder)
     why = (
         f"importance check failed after the fit: k̂ {check.k_hat:.2f} > {k_threshold(len(check.weights)):.2f}"
     )
@@ -279,7 +279,26 @@ def _check_record(check: CheckResult) -> dict:
     }
 
 
-def _checked(method: str, check: CheckResult, box, checks: dict) -> dict:
+#: The weighted draws of a drive answered by a check (not `identify`: its folder has its own).
+DRAWS_FILE = "draws.npz"
+
+
+def _checked(method: str, check: CheckResult, box, checks: dict, folder: Path) -> dict:
+    """The record of a drive answered by a passed check; its weighted draws and the noise model of
+    the check's likelihood are written to `DRAWS_FILE` (what predicting other driving needs)."""
+    noise = check.noise
+    write_atomically(
+        folder / DRAWS_FILE,
+        lambda tmp: np.savez(
+            tmp,
+            names=np.asarray(box.names),
+            theta=check.theta,
+            weights=check.weights,
+            channels=np.asarray(noise.channels),
+            noise_scale=np.asarray(noise.scale, float),
+            noise_tau=np.asarray(noise.tau, float),
+        ),
+    )
     return {
         "method": method,
         "parameters": weighted_summary(check.theta, check.weights, box, check.informed),
