@@ -10,9 +10,11 @@ car03's steer signal lags 0.15 s more. The fleet runs on a local cluster; its ta
 the truth by the 90 % intervals (identified parameters), the changes detected at the right drive
 and the false alarms, the share of drives answered at each level, wall time per drive.
 
-With --real, the real drives (default ../shared/real/*/recording.csv) are a fleet of their own:
-each drive's fleet answer beside its own `identify` (with the platform's effects and nothing held
-out, as the fleet escalates).
+With --real, the real drives (default ../shared/real/*/recording.csv) are a fleet of their own,
+on the first 70 % of each drive without its torques: each drive's fleet answer beside its own
+`identify` on the same part (with the platform's effects and nothing held out, as the fleet
+escalates), both scored on the rest of the drive (held-out NRMSE of the estimate, share of the
+held-out samples inside the 90 % predictive band) with `real_drives.py`'s least-squares floor.
 
 Writes experiments/results/fleet_sim{_quick}.json and .md (fleet_real.json and .md with --real).
 """
@@ -39,6 +41,10 @@ from vdsbi.fleet import (
     simulated_fleet,
 )
 from vdsbi.inference import TrainingSettings
+from vdsbi.problem import ProblemSettings, make_problem
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import real_drives  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 #: The parameters scored (those a drive without torques identifies, and the changes').
@@ -130,33 +136,45 @@ def markdown(s: dict, args) -> str:
     return "\n".join(lines)
 
 
-def real(folder: Path, workers: int, answered: Path | None = None) -> dict:
-    """The real drives as a fleet, each answer beside its own identify (`answered`: a fleet
-    output of these drives to read the fleet's answers from instead of running it)."""
+def real(folder: Path, workers: int, quick: bool = False) -> dict:
+    """The real drives as a fleet, each a car of its own, on the first `TRAIN_FRACTION` of the
+    drive without its torques (as `real_drives.py` runs `identify`); beside each answer, `identify`
+    alone on the same part (the platform's effects, nothing held out, as the fleet escalates).
+    Both, and the least-squares floor, are scored on the rest of the drive. `quick`: the quick
+    fleet settings and a one-round `identify` of 300 simulations (a smoke run)."""
     import pandas as pd
 
     from vdsbi import api
+    from vdsbi.io import load_drive
 
-    drives = sorted(folder.glob("*/recording.csv"))
-    rows = [
-        {"car": d.parent.name, "recording": str(d), "vehicle": str(d.parent / "vehicle.json"), "time": 0}
-        for d in drives
-    ]
     with tempfile.TemporaryDirectory() as tmp:
+        rows, rests = [], {}
+        for path in sorted(folder.glob("*/recording.csv")):
+            car = path.parent.name
+            rec, veh = load_drive(path, path.parent / "vehicle.json")
+            cut = rec.t[0] + real_drives.TRAIN_FRACTION * rec.duration
+            first = real_drives.without_torques(rec, rec.t[0], cut)
+            (Path(tmp) / car).mkdir()
+            first.to_csv(Path(tmp) / car / "recording.csv")
+            rows.append(
+                {
+                    "car": car,
+                    "recording": f"{car}/recording.csv",
+                    "vehicle": str(path.parent / "vehicle.json"),
+                    "time": 0,
+                }
+            )
+            rests[car] = (real_drives.without_torques(rec, cut, rec.t[-1]), veh, path.parent)
         manifest = Path(tmp) / "manifest.csv"
         pd.DataFrame(rows).to_csv(manifest, index=False)
-        fleet_out = answered or Path(tmp) / "out"
-        if answered is None:
-            records = fleet(manifest, fleet_out, FleetSettings(), Cluster(workers=workers), log=print).records
-        else:
-            records = [json.loads(f.read_text()) for f in sorted((answered / "drives").glob("*/result.json"))]
+        fleet_out = Path(tmp) / "out"
+        settings = quick_settings() if quick else FleetSettings()
+        records = fleet(manifest, fleet_out, settings, Cluster(workers=workers), log=print).records
         misfits = {}
         if (fleet_out / "misfit.json").exists():
             misfits = {m["platform"]: m for m in json.loads((fleet_out / "misfit.json").read_text())}
         out = {}
         for r in records:
-            if r["car"] not in {x["car"] for x in rows}:
-                continue
             if not r.get("parameters"):
                 out[r["car"]] = {
                     "method": r["method"],
@@ -164,35 +182,54 @@ def real(folder: Path, workers: int, answered: Path | None = None) -> dict:
                     "fleet_seconds": r["seconds"],
                 }
                 continue
-            row = next(x for x in rows if x["car"] == r["car"])
-            # identify alone reads the drive as the fleet did (following the measured speed) with
-            # the effects the fleet's answer has
-            named = [n.split(".")[0] for n in r["parameters"] if "." in n]
+            rest, veh, source = rests[r["car"]]
+            names = list(r["parameters"])
+            effects = tuple(dict.fromkeys(n.split(".")[0] for n in names if "." in n))
             start = time.perf_counter()
             alone = api.identify(
-                row["recording"],
-                row["vehicle"],
+                str(Path(tmp) / r["car"] / "recording.csv"),
+                rests[r["car"]][1],
                 api.IdentifyOptions(
                     drive=api.DriveOptions(holdout=0.0, longitudinal="speed"),
-                    model=api.ModelOptions(effects=tuple(dict.fromkeys(named))),
+                    model=api.ModelOptions(effects=effects),
+                    budget=api.Budget(rounds=1, sims=300) if quick else api.Budget(),
                 ),
             )
             seconds = time.perf_counter() - start
+            test = make_problem(
+                rest, veh, ProblemSettings(longitudinal="speed", max_window=10.0, held_out=0.0)
+            )
+            drawn = _fleet_draws(fleet_out / "drives" / r["key"], r)
+            fleet_est = [r["parameters"][n]["estimate"] for n in names]
+            alone_params = alone.summary["parameters"]
+            alone_noise = [alone.summary["noise_model"][c]["residual_rms"] for c in test.channels]
+            ref = real_drives.reference(r["car"], source)
             params = {}
-            for name, p in r.get("parameters", {}).items():
-                q = alone.summary["parameters"].get(name)
-                if q is None:
-                    continue
-                params[name] = {
-                    "fleet": [p["q05"], p["estimate"], p["q95"], p["identified"]],
-                    "identify": [q["q05"], q["estimate"], q["q95"], q.get("identified") is not False],
-                }
+            for name, p in r["parameters"].items():
+                q = alone_params.get(name)
+                if q is not None:
+                    params[name] = {
+                        "fleet": [p["q05"], p["estimate"], p["q95"], p["identified"]],
+                        "identify": [q["q05"], q["estimate"], q["q95"], q.get("identified") is not False],
+                    }
             misfit = next((m for k, m in misfits.items() if k.startswith(r["car"] + "/")), None)
             out[r["car"]] = {
                 "method": r["method"],
                 "checks": r.get("checks"),
                 "fleet_seconds": r["seconds"],
                 "identify_seconds": round(seconds, 1),
+                "test_seconds": round(float(test.train.sum()) * test.compared_dt, 1),
+                "held_out": {
+                    "fleet": _held_out(test, names, fleet_est, effects, drawn),
+                    "identify": _held_out(
+                        test,
+                        list(alone_params),
+                        [alone_params[n]["estimate"] for n in alone_params],
+                        effects,
+                        (alone.predictive, alone_noise),
+                    ),
+                    "least_squares": real_drives.baseline(alone.problem, test, ref, [0.0])["nrmse"],
+                },
                 "parameters": params,
                 "diagnosis": None
                 if misfit is None
@@ -201,15 +238,86 @@ def real(folder: Path, workers: int, answered: Path | None = None) -> dict:
     return out
 
 
+#: Draws resampled from a fleet answer's weighted draws for its predictive band.
+BAND_DRAWS = 200
+
+
+def _fleet_draws(folder: Path, record: dict):
+    """(draws, noise std per channel) of a fleet answer: its weighted draws resampled, or an
+    escalated drive's `identify` draws."""
+    from vdsbi.fleet import DRAWS_FILE
+
+    if record["method"] == "identify":
+        import pandas as pd
+
+        res = json.loads((folder / "identify" / "posterior.json").read_text())
+        draws = pd.read_csv(folder / "identify" / "predictive_draws.csv").to_numpy()
+        return draws, [res["noise_model"][c]["residual_rms"] for c in res["noise_model"]]
+    saved = np.load(folder / DRAWS_FILE)
+    pick = np.random.default_rng(0).choice(len(saved["weights"]), BAND_DRAWS, p=saved["weights"])
+    return saved["theta"][pick], saved["noise_scale"]
+
+
+def _held_out(test, names: list[str], estimate: list[float], effects: tuple, drawn) -> dict:
+    """The point estimate's held-out NRMSE per channel and the share of held-out samples inside
+    the 90 % predictive band of the draws (with their noise model)."""
+    import jax
+
+    from vdsbi.problem.validation import band_coverage, predict, predictive_band
+    from vdsbi.simulator.effects import get_effect
+
+    est = np.asarray(estimate, float)
+    values = {e: {p: float(est[names.index(f"{e}.{p}")]) for p in get_effect(e).param_names} for e in effects}
+    pred, ok = predict(test, est[:6], effects, values)
+    draws, noise = drawn
+    band = predictive_band(
+        jax.random.key(0), test, np.asarray(draws, float), np.asarray(noise, float), effects
+    )
+    return {
+        "nrmse": real_drives.nrmse(test, pred, test.train) if ok else None,
+        "band_coverage": band_coverage(test, band, test.train),
+    }
+
+
 def real_markdown(s: dict) -> str:
-    lines = ["# The shared real drives as a fleet", ""]
+    lines = [
+        "# The shared real drives as a fleet: the first 70 % of each, scored on the rest",
+        "",
+        "| drive | level | held-out NRMSE yaw rate / a_y: fleet | identify alone | LS fit | inside 90 % band (yaw rate / a_y): fleet | identify alone | seconds: fleet / identify |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    two = lambda d: " / ".join(
+        "–" if d is None or d.get(c) is None else f"{d[c]:.3f}" for c in ("yaw_rate", "ay")
+    )
+    share = lambda d: " / ".join(
+        "–" if d.get(c) is None else f"{100 * d[c]:.0f}%" for c in ("yaw_rate", "ay")
+    )
+    for car, r in s.items():
+        if "held_out" not in r:
+            continue
+        h = r["held_out"]
+        lines.append(
+            f"| {car} | {r['method']} | {two(h['fleet']['nrmse'])} | {two(h['identify']['nrmse'])} | "
+            f"{two(h['least_squares'])} | {share(h['fleet']['band_coverage'])} | "
+            f"{share(h['identify']['band_coverage'])} | {r['fleet_seconds']} / {r['identify_seconds']} |"
+        )
+    lines += [
+        "",
+        "Each drive is a car of its own (its platform's estimator trained on it alone). The estimate "
+        "scored is each table's `estimate` column; the band is the posterior's draws (the fleet's "
+        "importance-weighted draws, resampled) with its noise model. A drive escalated to `identify` is "
+        "answered by the same call as `identify` alone. The fleet's seconds are the drive's own on its "
+        "worker, the first drive of its platform there, so compiling is in them; `benchmarks/fleet.py` "
+        "measures speed.",
+        "",
+    ]
     for car, r in s.items():
         if "parameters" not in r:
             lines += [f"## {car}: {r['method']} in {r['fleet_seconds']} s: {r.get('error')}", ""]
             continue
         checks = ", ".join(f"{k} k̂ {v['k_hat']}" for k, v in (r["checks"] or {}).items())
         lines += [
-            f"## {car}: {r['method']} ({checks}); {r['fleet_seconds']} s in the fleet, identify alone {r['identify_seconds']} s",
+            f"## {car}: {r['method']} ({checks}); the held-out part {r['test_seconds']} s",
             "",
             "| parameter | fleet q05 / estimate / q95 (identified) | identify q05 / estimate / q95 (identified) |",
             "|---|---|---|",
@@ -228,7 +336,6 @@ def real_markdown(s: dict) -> str:
 
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--answered", default=None, help="with --real: a fleet output to read the answers from")
     ap.add_argument(
         "--real", nargs="?", const=str(Path(__file__).resolve().parents[2] / "shared" / "real"), default=None
     )
@@ -241,10 +348,11 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", default=None, help="keep the fleet and its output here")
     args = ap.parse_args(argv)
     if args.real is not None:
-        s = real(Path(args.real), args.workers, None if args.answered is None else Path(args.answered))
+        s = real(Path(args.real), args.workers, args.quick)
+        stem = "fleet_real_quick" if args.quick else "fleet_real"
         RESULTS.mkdir(exist_ok=True)
-        (RESULTS / "fleet_real.json").write_text(json.dumps(s, indent=1) + "\n")
-        (RESULTS / "fleet_real.md").write_text(real_markdown(s))
+        (RESULTS / f"{stem}.json").write_text(json.dumps(s, indent=1) + "\n")
+        (RESULTS / f"{stem}.md").write_text(real_markdown(s))
         print(real_markdown(s))
         return s
     if args.quick:

@@ -12,7 +12,7 @@ Needs the ``fleet`` extra (``pip install 'vdsbi[fleet]'``: Dask.distributed).
 
 from ._amortized import AmortizedSettings as AmortizedSettings
 from ._changes import ChangeSettings as ChangeSettings
-from ._drive import Escalation as Escalation
+from ._drive import DRAWS_FILE as DRAWS_FILE, Escalation as Escalation
 from ._engine import Cluster as Cluster
 from ._fleet import FleetResult as FleetResult, FleetSettings as FleetSettings, fleet as fleet
 from ._misfit import Misfit as Misfit, MisfitSettings as MisfitSettings
