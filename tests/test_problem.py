@@ -265,5 +265,7 @@ def test_a_new_recording_length_compiles_the_measured_filter_as_one_program(long
     with jax.log_compiles(), caplog.at_level(logging.WARNING):
         make_problem(cut(6100), vehicle, speed)
     compiled = [r.getMessage() for r in caplog.records if r.getMessage().startswith("Compiling")]
-    filters = [m for m in compiled if "_filtered" in m or "conv_general_dilated" in m]
-    assert len(filters) == 1 and "jit(_filtered)" in filters[0], compiled
+    # Eagerly, the filter's convolution compiles as a program of its own; inside the filter's
+    # one program (compiled here, or already by an earlier test of this length) it does not.
+    eager = [m for m in compiled if m.startswith("Compiling jit(conv_general_dilated)")]
+    assert not eager and len(compiled) <= 3, compiled
