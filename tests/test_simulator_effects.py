@@ -21,6 +21,7 @@ from vdsbi.simulator import (
     seed_profile,
     simulate,
     solve,
+    theta_from_dict,
 )
 from vdsbi.simulator._effects._aero_drag import AIR_DENSITY
 from vdsbi.simulator.effects import EFFECTS, AbstractEffect, Param, effect_params_from, register_effect
@@ -326,3 +327,21 @@ def test_a_new_effect_takes_one_class_and_one_line(x64):
         EFFECTS.pop("test_tow_force", None)
     with pytest.raises(ValueError, match="test_tow_force"):
         make_model(VEHICLE, ["test_tow_force"])
+
+
+def test_every_effect_runs_a_float64_fit_on_float32_inputs_without_casting_warnings():
+    """A float64 likelihood fit drives inputs stored in float32: an effect that writes its float64
+    parameters into them must say how (JAX warns of an unsafe cast, and means to make it an error)."""
+    import warnings
+
+    inputs = seed_profile(1.0, 100.0, steer_amplitude=0.04, t0=0.2)
+    inputs = jax.tree.map(lambda a: jnp.asarray(a, jnp.float32) if isinstance(a, jax.Array) else a, inputs)
+    with jax.enable_x64(True), warnings.catch_warnings():
+        warnings.simplefilter("error", FutureWarning)
+        theta = jnp.asarray(theta_from_dict(SEED_TRUE_THETA), jnp.float64)
+        for name, effect in EFFECTS.items():
+            typical = {name: {p: float(hi) for p, (_, hi) in zip(effect.param_names, effect.typical)}}
+            ys, ok = simulate(
+                theta, inputs, default_vehicle(), v0=10.0, effects=[name], effect_params=typical
+            )
+            assert ok and np.isfinite(np.asarray(ys)).all(), name

@@ -6,7 +6,7 @@ import importlib
 import pkgutil
 
 from ._aero_drag import AeroDrag as AeroDrag
-from ._base import AbstractEffect as AbstractEffect, Context as Context, Param as Param
+from ._base import AbstractEffect as AbstractEffect, Context as Context, Param as Param, promoted as promoted
 from ._downforce import Downforce as Downforce
 from ._imu_lever_arm import ImuLeverArm as ImuLeverArm
 from ._imu_misalignment import ImuMisalignment as ImuMisalignment

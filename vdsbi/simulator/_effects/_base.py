@@ -54,6 +54,13 @@ class Param(NamedTuple):
     start: float
 
 
+def promoted(u: Array, *values) -> Array:
+    """`u` in the dtype it and `values` promote to: an effect's `inputs` writes its parameters or
+    states into it there and casts the result back to `u`'s dtype (what JAX does implicitly, with
+    a warning that it will become an error)."""
+    return u.astype(jnp.result_type(u, *values))
+
+
 def _check_params(cls) -> None:
     """An effect's parameter records are consistent: checked when its class is defined."""
     where = f"effects: {cls.__name__}"
@@ -140,7 +147,8 @@ class AbstractEffect(eqx.Module):
         return jnp.zeros(self.num_states)
 
     def inputs(self, p, z, u: Float[Array, "3"]) -> Float[Array, "3"]:
-        """Effective (steer, torque_front, torque_rear) acting on the vehicle."""
+        """Effective (steer, torque_front, torque_rear) acting on the vehicle, in `u`'s dtype (a
+        float64 fit may drive float32 inputs: write into `promoted(u, p)`, then cast back)."""
         return u
 
     def friction_scale(self, p) -> tuple[Float[Array, ""], Float[Array, ""]]:

@@ -1,4 +1,4 @@
-from ._base import AbstractEffect, Param
+from ._base import AbstractEffect, Param, promoted
 
 
 class SteerOffset(AbstractEffect):
@@ -15,4 +15,4 @@ class SteerOffset(AbstractEffect):
     )
 
     def inputs(self, p, z, u):
-        return u.at[0].add(p[0])
+        return promoted(u, p).at[0].add(p[0]).astype(u.dtype)

@@ -1,6 +1,6 @@
 import jax.numpy as jnp
 
-from ._base import AbstractEffect, Param
+from ._base import AbstractEffect, Param, promoted
 
 #: Smallest time constant used, s: keeps the lag state stable for RK4 at the default 2.5 ms step.
 TAU_FLOOR = 1e-3
@@ -25,4 +25,4 @@ class SteeringLag(AbstractEffect):
         return jnp.where(p[0] == 0, 0.0, (u_cmd[:1] - z) / tau)
 
     def inputs(self, p, z, u):
-        return u.at[0].set(jnp.where(p[0] == 0, u[0], z[0]))
+        return promoted(u, p, z).at[0].set(jnp.where(p[0] == 0, u[0], z[0])).astype(u.dtype)

@@ -1,4 +1,4 @@
-from ._base import AbstractEffect, Param
+from ._base import AbstractEffect, Param, promoted
 
 
 class TorqueGain(AbstractEffect):
@@ -14,4 +14,4 @@ class TorqueGain(AbstractEffect):
     description = "commanded torque is not applied torque (gain of actuator and driveline)"
 
     def inputs(self, p, z, u):
-        return u.at[1:].multiply(p[0])
+        return promoted(u, p).at[1:].multiply(p[0]).astype(u.dtype)

@@ -1,6 +1,6 @@
 import jax.numpy as jnp
 
-from ._base import AbstractEffect, Param
+from ._base import AbstractEffect, Param, promoted
 from ._steering_lag import TAU_FLOOR
 
 
@@ -21,4 +21,4 @@ class TorqueLag(AbstractEffect):
         return jnp.where(p[0] == 0, 0.0, (u_cmd[1:] - z) / tau)
 
     def inputs(self, p, z, u):
-        return u.at[1:].set(jnp.where(p[0] == 0, u[1:], z))
+        return promoted(u, p, z).at[1:].set(jnp.where(p[0] == 0, u[1:], z)).astype(u.dtype)
