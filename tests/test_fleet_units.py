@@ -157,6 +157,27 @@ def test_cluster_by_address_sets_up_its_workers(tmp_path):
             assert client.submit(cache_dir, pure=False).result() == str(tmp_path)
 
 
+def test_local_workers_share_out_the_cores(monkeypatch):
+    """Each local worker splits its batches of draws over its share of the cores, not all of them
+    (two workers of two devices each on two cores would contend)."""
+    pytest.importorskip("distributed")
+
+    from vdsbi.fleet import Cluster
+    from vdsbi.fleet._engine import _cores, open_client
+
+    def devices():
+        import jax
+
+        import vdsbi  # noqa: F401  (sizes JAX's CPU devices when imported first)
+
+        return jax.device_count()
+
+    monkeypatch.delenv("VDSBI_CPU_DEVICES", raising=False)
+    with open_client(Cluster(workers=2)) as client:
+        counts = client.run(devices)
+    assert sorted(counts.values()) == [max(1, _cores() // 2)] * 2
+
+
 def test_a_local_cluster_left_without_workers_gives_up_its_drives(monkeypatch):
     """Every worker gone and none restarted: the run says so and returns the drives unanswered
     (a re-run retries them) instead of waiting for ever."""

@@ -16,6 +16,8 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 
+from ..simulator import ENV_CPU_DEVICES
+
 #: XLA flags that keep a worker's programs on one thread: the cluster's parallelism is the workers.
 SINGLE_THREAD_FLAGS = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
 #: Deaths of the worker running a drive before that drive is given up (this run; a re-run retries).
@@ -80,6 +82,13 @@ def _plugin(folder: str | None):
     return type("VdsbiJaxSetup", (JaxSetup, WorkerPlugin), {})(folder)
 
 
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
 @contextlib.contextmanager
 def open_client(cluster: Cluster) -> Iterator:
     """A `distributed.Client` on `cluster`, its workers set up (`JaxSetup`); closed on exit."""
@@ -92,14 +101,17 @@ def open_client(cluster: Cluster) -> Iterator:
             client = Client(cluster.address)
             local = None
         else:
+            workers = cluster.workers or os.cpu_count() or 1
             env = {
                 "XLA_FLAGS": " ".join([cluster.xla_flags, SINGLE_THREAD_FLAGS]).strip(),
                 "OMP_NUM_THREADS": "1",
                 "OPENBLAS_NUM_THREADS": "1",
                 "MKL_NUM_THREADS": "1",
+                # The cores shared out: a worker splits its batches of draws over its share only.
+                ENV_CPU_DEVICES: os.environ.get(ENV_CPU_DEVICES) or str(max(1, _cores() // workers)),
             }
             local = LocalCluster(
-                n_workers=cluster.workers or os.cpu_count() or 1,
+                n_workers=workers,
                 threads_per_worker=1,
                 processes=True,
                 dashboard_address=None,

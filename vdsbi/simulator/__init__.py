@@ -14,7 +14,7 @@ from ._profiles import (
     random_profile as random_profile,
     seed_profile as seed_profile,
 )
-from ._sharding import shard_draws as shard_draws
+from ._sharding import ENV_CPU_DEVICES as ENV_CPU_DEVICES, shard_draws as shard_draws
 from ._solve import (
     check_theta as check_theta,
     make_model as make_model,
