@@ -2,8 +2,11 @@
 
 A diagnosis tool will meet mismatches that none of its candidate effects describes. Then the
 honest answer is "detected, located, not (fully) explained", not a confident wrong name. This
-script makes clean recordings with the concealed-effects generator, corrupts them with
-mismatches outside the library, runs `diagnose` on the files, and records what it says.
+script makes clean recordings with the concealed-effects generator, corrupts them with sensor
+faults written into the file (not simulated by an effect), runs `diagnose` on the files, and
+records what it says. Two of the faults have an effect of their own in the library
+(`sensor_scale` for a gyro's or an accelerometer's gain, `signal_delay` for a logger's delay):
+for those, the right answer is that effect; for the rest, "not explained".
 
 Corruptions (applied to the written recording, noise included; the truth stays in truth.json):
   * gyro_scale: yaw-rate sensor gain 1.05 (a 5 % scale-factor error);
