@@ -199,7 +199,7 @@ def real(folder: Path, workers: int, quick: bool = False) -> dict:
             test = make_problem(
                 rest, veh, ProblemSettings(longitudinal="speed", max_window=10.0, held_out=0.0)
             )
-            drawn = _fleet_draws(fleet_out / "drives" / r["key"], r)
+            drawn = _fleet_draws(fleet_out / "drives" / r["key"], r, test.channels)
             fleet_est = [r["parameters"][n]["estimate"] for n in names]
             alone_params = alone.summary["parameters"]
             alone_noise = [alone.summary["noise_model"][c]["residual_rms"] for c in test.channels]
@@ -242,9 +242,9 @@ def real(folder: Path, workers: int, quick: bool = False) -> dict:
 BAND_DRAWS = 200
 
 
-def _fleet_draws(folder: Path, record: dict):
-    """(draws, noise std per channel) of a fleet answer: its weighted draws resampled, or an
-    escalated drive's `identify` draws."""
+def _fleet_draws(folder: Path, record: dict, channels) -> tuple:
+    """(draws, noise std per channel of `channels`) of a fleet answer: its weighted draws
+    resampled, or an escalated drive's `identify` draws."""
     from vdsbi.fleet import DRAWS_FILE
 
     if record["method"] == "identify":
@@ -252,10 +252,11 @@ def _fleet_draws(folder: Path, record: dict):
 
         res = json.loads((folder / "identify" / "posterior.json").read_text())
         draws = pd.read_csv(folder / "identify" / "predictive_draws.csv").to_numpy()
-        return draws, [res["noise_model"][c]["residual_rms"] for c in res["noise_model"]]
+        return draws, [res["noise_model"][c]["residual_rms"] for c in channels]
     saved = np.load(folder / DRAWS_FILE)
     pick = np.random.default_rng(0).choice(len(saved["weights"]), BAND_DRAWS, p=saved["weights"])
-    return saved["theta"][pick], saved["noise_scale"]
+    scale = dict(zip(saved["channels"], saved["noise_scale"]))
+    return saved["theta"][pick], [scale[c] for c in channels]
 
 
 def _held_out(test, names: list[str], estimate: list[float], effects: tuple, drawn) -> dict:
