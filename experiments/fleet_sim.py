@@ -188,7 +188,7 @@ def real(folder: Path, workers: int, quick: bool = False) -> dict:
             start = time.perf_counter()
             alone = api.identify(
                 str(Path(tmp) / r["car"] / "recording.csv"),
-                rests[r["car"]][1],
+                veh,
                 api.IdentifyOptions(
                     drive=api.DriveOptions(holdout=0.0, longitudinal="speed"),
                     model=api.ModelOptions(effects=effects),
