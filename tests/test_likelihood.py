@@ -206,7 +206,8 @@ def test_the_parameters_a_drive_informs_are_those_its_channels_depend_on(x64):
     import jax.numpy as jnp
 
     from vdsbi.estimation._start import informed_parameters
-    from vdsbi.problem import split_parameters, windowed_model
+    from vdsbi.problem import windowed_model
+    from vdsbi.problem.points import split_parameters
 
     veh = default_vehicle()
     box = Box.from_dict(prior_box(veh), PARAM_NAMES)

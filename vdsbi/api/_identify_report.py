@@ -14,7 +14,8 @@ import numpy as np
 
 from .. import __version__
 from ..io import InputError
-from ..problem import Box, Problem, parameter_names, parameter_units, split_parameters
+from ..problem import Box, Problem, parameter_names, parameter_units
+from ..problem.points import split_parameters
 from ..problem.validation import band_coverage, validate
 from ..simulator.models import LongitudinalChoice
 from ._commands import diagnose_command

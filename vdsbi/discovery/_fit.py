@@ -22,17 +22,16 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.flatten_util import ravel_pytree
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
 from ..estimation import V0_STD, FitRequest, ModelError, SensorNoise, fit_likelihood
 from ..problem import Box, Problem, WindowedModel, parameter_names, windowed_model
+from ..problem.points import Point, Space, free_positions, gather, padded, positions, scatter
 from ..simulator import PARAM_NAMES, Vehicle, make_model
 from ..simulator.effects import EFFECTS
 from ..simulator.models import AbstractVehicleModel, LongitudinalMode, model_class
 from ..simulator.solvers import Solver
 from ._candidates import EffectSpace, effect_space
-from ._point import Point, Space, free_positions, positions
 from ._results import DiscoveryFit
 
 #: Unit-box coordinates of starting values are clipped to [EDGE, 1 − EDGE] before the logit.
@@ -57,54 +56,42 @@ def make_space(vehicle: Vehicle, effects: EffectSpace) -> Space:
     return Space(
         theta=Box.from_dict(vehicle.default_prior(), PARAM_NAMES),
         effects=Box(jnp.asarray(effects.lo), jnp.asarray(effects.hi), names),
-        null=jnp.asarray(effects.null),
         slices=tuple((s.start, s.stop) for s in effects.slices.values()),
     )
 
 
 class _Target(eqx.Module):
-    """The fitted samples: the windowed super-model and what it is compared with."""
+    """The fitted samples: the windowed super-model and what it is compared with; `null`, the
+    values at which every effect vanishes (where inactive effects are held)."""
 
     wm: WindowedModel
     measured: Float[Array, "W K C"]
     sigma: Float[Array, " C"]
     mask: Float[Array, "W K"]
+    null: Float[Array, " E"]
 
 
-def _readings(wm: WindowedModel, space: Space, z: Point, active) -> Float[Array, "W K C"]:
-    """The compared samples of every window at z; each window starts from its measured speed
-    plus its fitted offset."""
-    theta, effect_params = space.physical(z, active)
+def _readings(wm: WindowedModel, space: Space, z: Point, null, active: Bool[Array, " E"]):
+    """The compared samples of every window at z, the effects not `active` held at their `null`
+    values; each window starts from its measured speed plus its fitted offset."""
+    free = Point(jnp.ones(jnp.shape(z.theta), bool), jnp.ones(jnp.shape(z.v0), bool), active)
+    theta, effect_params = space.values(z, Point(z.theta, z.v0, null), free)
     ys, _ = wm(theta, effect_params, v0=wm.v0 + z.v0)
     return ys
 
 
 def whitened(space: Space, target: _Target, z: Point, active):
-    r = (_readings(target.wm, space, z, active) - target.measured) / target.sigma
+    r = (_readings(target.wm, space, z, target.null, active) - target.measured) / target.sigma
     r = jnp.where(target.mask[:, :, None] > 0, r, 0.0)
     return r.reshape(-1)
 
 
-def _padded(free, width: int, size: int) -> np.ndarray:
-    """`free` indices padded to `width` with the out-of-range index `size`: every number of free
-    parameters then shares one compilation (the padding's slots are read as 0 and dropped)."""
-    index = np.full(max(len(free), width), size)
-    index[: len(free)] = free
-    return index
-
-
-def _take(z, free):
-    """z[free] with the padding's slots at 0."""
-    return jnp.where(free < z.size, z[jnp.minimum(free, z.size - 1)], 0.0)
-
-
 @eqx.filter_jit
-def _linearised(wm, space, z: Point, active, free):
+def _linearised(wm, space, z: Point, null, active, free):
     """The readings at z and their derivative by z's flattened entries `free` (padded:
-    `_padded`, its slots give zero columns); one program serves predictions and their variances."""
-    flat, unravel = ravel_pytree(z)
-    fn = lambda y: (r := _readings(wm, space, unravel(flat.at[free].set(y, mode="drop")), active), r)
-    jac, readings = jax.jacfwd(fn, has_aux=True)(_take(flat, free))
+    `padded`, its slots give zero columns); one program serves predictions and their variances."""
+    fn = lambda y: (r := _readings(wm, space, scatter(z, free, y), null, active), r)
+    jac, readings = jax.jacfwd(fn, has_aux=True)(gather(z, free))
     return readings, jac
 
 
@@ -141,6 +128,7 @@ class Fitter:
             measured=jnp.asarray(train.y),
             sigma=jnp.asarray(train.sigma),
             mask=jnp.asarray(train.train.astype(float)),
+            null=jnp.asarray(self.effects.null),
         )
         w = train.num_windows
         self.num_windows = w
@@ -150,11 +138,7 @@ class Fitter:
         self.num_residuals = int(train.train.sum()) * len(train.channels)
         e = self.effects
         self._z_eff_start = np.asarray(self.space.effects.to_unbounded(e.start, edge=EDGE))
-        self.box = Box(
-            jnp.concatenate([self.space.theta.low, self.space.effects.low]),
-            jnp.concatenate([self.space.theta.high, self.space.effects.high]),
-            (*PARAM_NAMES, *self.space.effects.names),
-        )
+        self.box = self.space.box
 
     def windowed(self, problem: Problem) -> WindowedModel:
         """The super-model over the windows of `problem`."""
@@ -237,8 +221,8 @@ class Fitter:
         z = self._z_on(z, problem).jax()
         width = self.width + (0 if problem is None else problem.num_windows - self.num_windows)
         size = sum(leaf.size for leaf in jax.tree.leaves(z))
-        index = jnp.asarray(_padded(np.asarray(free, int), width, size))
-        readings, jac = _linearised(wm, self.space, z, act, index)
+        index = jnp.asarray(padded(np.asarray(free, int), width, size))
+        readings, jac = _linearised(wm, self.space, z, self.target.null, act, index)
         return np.asarray(readings), np.asarray(jac)[..., : len(free)]
 
     def prediction_variance(self, fit: DiscoveryFit, problem: Problem | None = None) -> np.ndarray:

@@ -26,9 +26,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..problem.points import positions
 from ..simulator import PARAM_NAMES
 from ._candidates import LOOKALIKE_GROUPS, label
-from ._point import positions
 from ._results import DiscoveryFit, Ranked
 
 #: Log Bayes factor counted as strong evidence (odds 20:1).

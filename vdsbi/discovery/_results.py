@@ -12,8 +12,8 @@ from ..diagnostics import Localisation, MisspecificationTest
 from ..problem import Problem
 
 if TYPE_CHECKING:  # annotations only (the fitter imports this module)
+    from ..problem.points import Point
     from ._fit import Fitter
-    from ._point import Point
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -33,7 +33,7 @@ class DiscoveryFit:
         num_params: number of free parameters K (θ, initial speeds, effect parameters).
         residual: (N,) residual whitened by the sensor noise, (W, K_t, C) flattened; masked entries 0.
         jacobian: (N, K) Jacobian of the residual along the free entries of z.
-        free: (K,) indices of the free entries of z, flattened (`vdsbi.discovery._point.positions`).
+        free: (K,) indices of the free entries of z, flattened (`vdsbi.problem.points.positions`).
         iterations: LM iterations used.
         converged: whether the relative cost change fell below tolerance.
         cov: (K, K) the estimator's covariance of the free entries of z (model error in its

@@ -25,12 +25,11 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.flatten_util import ravel_pytree
 
+from ..problem.points import Point, gather, scatter
 from ..simulator.effects import TERMS, term_effect, term_formula
 from ._candidates import effect_space
 from ._fit import Fitter, whitened
-from ._point import Point
 from ._rank import STRONG, bic_score, claim_limit, worst_channel
 from ._results import DiscoveryFit, TermDiscovery
 
@@ -40,9 +39,8 @@ TERM_EFFECT = "discovered_terms"
 @eqx.filter_jit
 def _jacobian(space, target, z: Point, active, free):
     """The whitened residual at z and its derivative by z's flattened entries `free`."""
-    flat, unravel = ravel_pytree(z)
-    fn = lambda y: whitened(space, target, unravel(flat.at[free].set(y)), active)
-    y0 = flat[free]
+    fn = lambda y: whitened(space, target, scatter(z, free, y), active)
+    y0 = gather(z, free)
     return fn(y0), jax.jacfwd(fn)(y0)
 
 

@@ -29,9 +29,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array
 
-from ..problem import Box, Part, Problem, parameter_names, split_parameters, windowed_model
+from ..problem import Box, Part, Problem, parameter_names, windowed_model
+from ..problem.points import Point, Space, mask_of, padded, positions, scatter
 from ..simulator import PARAM_NAMES
 from ..simulator.models import AbstractVehicleModel
 from ..simulator.solvers import Solver
@@ -136,9 +137,7 @@ def _fit(data: Problem, wm, effects, start, box: Box, request: FitRequest) -> Li
     z0 = np.asarray(box64.to_unbounded(start, edge=1e-4))
     layout = _layout(wm, data, box64, z0, effects, request, batch=len(starts))
     mean = prior_mean(box, wm.model.effects)
-    coords = _Coordinates(
-        box64, jnp.asarray(z0), jnp.asarray(start, jnp.float64), jnp.asarray(layout.padded), effects
-    )
+    coords = _coordinates(box64, effects, z0, start, layout)
     fit = _fitter(wm, data, mask, coords, layout.extended(mean[layout.idx]), request.max_steps)
     first = _Noise(scale, tau, steps=())
     sensor_only = isinstance(request.noise, SensorNoise)
@@ -150,12 +149,11 @@ def _fit(data: Problem, wm, effects, start, box: Box, request: FitRequest) -> Li
 
 
 class _Layout(NamedTuple):
-    """The fitted coordinates: the `free` names at box indices `idx`, padded past the box's end
-    to `width` (`padded`), then one start-speed correction per corrected window (`windows`)."""
+    """The fitted coordinates: the `free` names at box indices `idx`, padded to `width`, then one
+    start-speed correction per corrected window (`windows`)."""
 
     free: tuple[str, ...]
     idx: np.ndarray
-    padded: np.ndarray
     width: int
     windows: int
 
@@ -173,11 +171,8 @@ def _layout(wm, data: Problem, box: Box, z0: np.ndarray, effects, request: FitRe
     names = box.names
     free = tuple(n for n in names if n in free)
     idx = np.asarray([names.index(n) for n in free], dtype=int)
-    k = len(idx)
-    width = k if request.width is None else max(int(request.width), k)
-    # Padding slots index past the end: nothing reads them, their prior holds them at 0.
-    padded = np.concatenate([idx, np.full(width - k, len(names))]).astype(int)
-    return _Layout(free, idx, padded, width, corrected_windows(data))
+    width = len(idx) if request.width is None else max(int(request.width), len(idx))
+    return _Layout(free, idx, width, corrected_windows(data))
 
 
 class _Noise(NamedTuple):
@@ -313,30 +308,46 @@ def _covariances(data: Problem, mask, jac, r, z, tau):
 
 
 class _Coordinates(eqx.Module):
-    """Where a fit moves: the free logit coordinates `idx` (padded past the end to a common
-    width) of the box's parameters, the others held exactly at `start`; `z0` the start in logit
-    coordinates, `effects` the model's effect classes."""
+    """Where a fit moves: the flattened entries `index` of the point `z0` (the free parameters'
+    unbounded coordinates, padded to a common width, then the corrected windows' start speeds);
+    the other parameters held exactly at `held`'s values."""
 
-    box: Box
-    z0: Float[Array, " P"]
-    start: Float[Array, " P"]
-    idx: Array
-    effects: tuple[type, ...] = eqx.field(static=True)
+    space: Space
+    z0: Point
+    held: Point
+    index: Array
+    width: int = eqx.field(static=True)
 
     def values(self, p):
-        """(θ, effect parameters) at p's free coordinates."""
-        k = self.idx.shape[0]
-        z = self.z0.at[self.idx].set(p[:k], mode="drop")
-        is_free = jnp.zeros(self.z0.shape[0], bool).at[self.idx].set(True, mode="drop")
-        return split_parameters(jnp.where(is_free, self.box.from_unbounded(z), self.start), self.effects)
+        """(θ, effect parameters, start-speed offsets) at the fitted entries `p`."""
+        z = scatter(self.z0, self.index, p)
+        theta, effect_params = self.space.values(z, self.held, mask_of(z, self.index))
+        return theta, effect_params, z.v0
+
+
+def _coordinates(box: Box, effects, z0: np.ndarray, start: np.ndarray, layout: _Layout) -> _Coordinates:
+    """The fit's coordinates: `layout`'s free parameters (box indices) and start speeds, as
+    entries of a point."""
+    nt, n_v = len(PARAM_NAMES), layout.windows
+    at = positions(Point(z0[:nt], np.zeros(n_v), z0[nt:]))
+    in_box = np.concatenate([at.theta, at.effects])[layout.idx]
+    size = len(z0) + n_v
+    index = np.concatenate([padded(in_box, layout.width, size), at.v0]).astype(int)
+    start = jnp.asarray(start, jnp.float64)
+    return _Coordinates(
+        Space.of(box, effects),
+        Point(jnp.asarray(z0[:nt]), jnp.zeros(n_v), jnp.asarray(z0[nt:])),
+        Point(start[:nt], jnp.zeros(n_v), start[nt:]),
+        jnp.asarray(index),
+        layout.width,
+    )
 
 
 def _residual(wm, y, mask, coords: _Coordinates, p, std):
     """Whitened residual at p = [free logit coordinates (padded), start-speed corrections (W or
     none)]."""
-    k = coords.idx.shape[0]
-    theta, effect_params = coords.values(p)
-    pred, _ = wm(theta, effect_params, v0=wm.v0 + p[k:] if p.shape[0] > k else None)
+    theta, effect_params, v0 = coords.values(p)
+    pred, _ = wm(theta, effect_params, v0=wm.v0 + v0 if v0.shape[0] else None)
     return jnp.where(mask[..., None], (pred - y) / std, 0.0).ravel()
 
 
@@ -345,7 +356,7 @@ def _lm(wm, y, mask, coords: _Coordinates, p, mean, std, max_steps):
     """One Levenberg–Marquardt fit of the free coordinates and start-speed corrections for given
     per-channel stds; a module-level jit, so every fit of the same shapes (the reweighting passes,
     the refit, every candidate of a search) compiles once."""
-    k = coords.idx.shape[0]
+    k = coords.width
     prec = jnp.concatenate([jnp.full(k, PRIOR_Z_STD**-2), jnp.full(p.shape[0] - k, V0_STD**-2)])
     fn = lambda q: _residual(wm, y, mask, coords, q, std)
     return levenberg_marquardt(

@@ -20,7 +20,8 @@ import numpy as np
 from jaxtyping import PRNGKeyArray
 from scipy.stats import chi2
 
-from ..problem import CLEAN_BATCH, Problem, simulate_draws, split_parameters, windowed_model
+from ..problem import CLEAN_BATCH, Problem, simulate_draws, windowed_model
+from ..problem.points import split_parameters
 from ..simulator.solvers import Solver
 from ._laplace_posterior import LikelihoodPosterior
 from ._likelihood import PRIOR_Z_STD

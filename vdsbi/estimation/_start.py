@@ -9,7 +9,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..problem import Box, Problem, simulate_draws, split_parameters
+from ..problem import Box, Problem, simulate_draws
+from ..problem.points import split_parameters
 from ..simulator import PARAM_NAMES
 
 #: The prior's mode stays this far inside the box (a share of its width), so its logit is finite.

@@ -30,7 +30,8 @@ from jaxtyping import PRNGKeyArray
 from scipy import stats
 
 from ..estimation import PRIOR_Z_STD, NoiseModel, measure_noise
-from ..problem import CLEAN_BATCH, Box, Problem, simulate_draws, split_parameters, windowed_model
+from ..problem import CLEAN_BATCH, Box, Problem, simulate_draws, windowed_model
+from ..problem.points import split_parameters
 from ._amortized import Proposal
 from ._psis import psis
 

@@ -22,7 +22,8 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, PRNGKeyArray
 
 from ..inference import input_channels
-from ..problem import Problem, split_parameters, windowed_model
+from ..problem import Problem, windowed_model
+from ..problem.points import split_parameters
 from ..simulator import solve
 from ..simulator.models import steady_lateral_state
 

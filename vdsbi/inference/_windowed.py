@@ -9,7 +9,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from ..problem import Problem, simulate_draws, split_parameters, windowed_model
+from ..problem import Problem, simulate_draws, windowed_model
+from ..problem.points import split_parameters
 from ..simulator.models import SpeedDriven
 from ..simulator.solvers import Solver
 from ._apt_state import APTState

@@ -1,11 +1,12 @@
 """A recording plus a vehicle as one problem: windows, channels, noise, inputs, initial states, held-out.
 
-`make_problem` builds a `Problem`; `windowed_model` / `simulate_draws` simulate its windows;
+`make_problem` builds a `Problem`; `windowed_model` / `simulate_draws` simulate its windows; `points`
+holds its parameters as one pytree and the map to the simulator's values;
 `validation` scores a parameter set on a problem's windows (channel scores, predictions, the
 predictive band and its coverage) and gives the driving envelope a fit saw and the windows beyond it.
 """
 
-from . import validation as validation
+from . import points as points, validation as validation
 from ._box import Box as Box
 from ._concat import concat_problems as concat_problems
 from ._default_effects import default_effects as default_effects
@@ -24,7 +25,6 @@ from ._parameters import (
     parameter_names as parameter_names,
     parameter_units as parameter_units,
     prior_box as prior_box,
-    split_parameters as split_parameters,
 )
 from ._problem import (
     Part as Part,
