@@ -12,7 +12,8 @@ import pytest
 
 from vdsbi import api
 from vdsbi.api._validate import PROFILE_V0
-from vdsbi.inference import IdentifySettings, StatisticsMLP, identify, seed_prior
+from vdsbi.inference import IdentifySettings, StatisticsMLP, identify
+from vdsbi.inference._vehicle import seed_prior
 from vdsbi.io import InputError, read_recording
 from vdsbi.io._errors import SimulationError
 from vdsbi.simulator import CHANNELS, PARAM_NAMES, SEED_TRUE_THETA, default_vehicle, seed_profile
