@@ -15,6 +15,7 @@ from vdsbi.simulator import (
     GRAVITY,
     SEED_TRUE_THETA,
     Inputs,
+    SeedManeuver,
     default_vehicle,
     make_model,
     seed_profile,
@@ -102,7 +103,9 @@ def test_the_tyres_saturate_later_at_speed(x64):
 def test_gradient_with_respect_to_coef_matches_finite_differences(x64, getkey):
     model = make_model(VEHICLE, ("downforce",))
     # a fast second of the seed's maneuver: near the limit, so a_y and yaw rate feel the load
-    inputs = seed_profile(1.0, steer_amplitude=0.03, torque_period=1.0, steer_period=1.0)
+    inputs = seed_profile(
+        1.0, maneuver=SeedManeuver(steer_amplitude=0.03, torque_period=1.0, steer_period=1.0)
+    )
     weights = jax.random.normal(getkey(), (inputs.num_samples, 6), dtype=jnp.float64)
     theta = jnp.asarray(THETA)
 

@@ -16,6 +16,7 @@ from vdsbi.simulator import (
     PARAM_NAMES,
     SEED_TRUE_THETA,
     Inputs,
+    SeedManeuver,
     default_vehicle,
     make_model,
     seed_profile,
@@ -334,7 +335,7 @@ def test_every_effect_runs_a_float64_fit_on_float32_inputs_without_casting_warni
     parameters into them must say how (JAX warns of an unsafe cast, and means to make it an error)."""
     import warnings
 
-    inputs = seed_profile(1.0, 100.0, steer_amplitude=0.04, t0=0.2)
+    inputs = seed_profile(1.0, 100.0, maneuver=SeedManeuver(steer_amplitude=0.04), t0=0.2)
     inputs = jax.tree.map(lambda a: jnp.asarray(a, jnp.float32) if isinstance(a, jax.Array) else a, inputs)
     with jax.enable_x64(True), warnings.catch_warnings():
         warnings.simplefilter("error", FutureWarning)
