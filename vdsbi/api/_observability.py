@@ -139,7 +139,7 @@ def _report(model, theta, inputs, v0, params, channels, noise) -> dict:
     """`fisher_report` of the maneuver in float64."""
     import jax
 
-    from ..diagnostics import fisher_report, model_fisher
+    from ..diagnostics import MeasurementModel, fisher_report, model_fisher
 
     with jax.enable_x64(True):
         import jax.numpy as jnp
@@ -150,8 +150,7 @@ def _report(model, theta, inputs, v0, params, channels, noise) -> dict:
             inputs,
             v0,
             tuple(jnp.asarray(p, dtype=float) for p in params),
-            channels=channels,
-            noise=noise,
+            measurement=MeasurementModel(channels=channels, noise=noise),
         )
         return fisher_report(fisher)
 
