@@ -7,11 +7,10 @@ from vdsbi.inference import (
     ChannelStandardization,
     FlowMatchingSettings,
     NPEConfig,
-    SequentialSettings,
     SplineFlowSettings,
     TrainingSettings,
 )
-from vdsbi.inference._config import LeakPenalty, Truncation, WeightAveraging
+from vdsbi.inference._config import LeakPenalty, SequentialSettings, Truncation, WeightAveraging
 from vdsbi.inference._standardize import GlobalStandardization, NoStandardization, TrajectoryStandardization
 from vdsbi.inference._theta_map import IdentityMap, LogitMap
 

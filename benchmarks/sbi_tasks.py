@@ -50,7 +50,7 @@ from _grid_plot import plot_grid  # noqa: E402
 from tasks import get_task  # noqa: E402
 
 from vdsbi.diagnostics import c2st  # noqa: E402
-from vdsbi.inference import IdentityEmbedding, NPEConfig, apt  # noqa: E402
+from vdsbi.inference import Execution, IdentityEmbedding, NPEConfig, RoundSchedule, apt  # noqa: E402
 from vdsbi.runtime import release_compiled_programs  # noqa: E402
 
 PUBLISHED = {  # sbibm (Lueckmann et al. 2021), mean C2ST over 10 observations, sbi + NSF
@@ -187,11 +187,11 @@ def train_posterior(task, method, budget, cfg, key, x_o, obs_id=None):
         task.prior,
         x_o,
         embedding=IdentityEmbedding(task.dim_x),
-        rounds=rounds,
-        sims_per_round=budget // 10 if seq else budget,
+        schedule=RoundSchedule(
+            rounds=rounds, sims_per_round=budget // 10 if seq else budget, truncate=method == "tsnpe"
+        ),
         config=cfg,
-        truncate=method == "tsnpe",
-        on_round_end=progress,
+        execution=Execution(on_round_end=progress),
     )
 
 

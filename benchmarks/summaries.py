@@ -24,7 +24,8 @@ import numpy as np
 from _config import flat_config, make_config
 
 from vdsbi.diagnostics import expected_coverage, sbc_ks_pvalues, sbc_ranks
-from vdsbi.inference import OBSERVATIONS, IdentifySettings, identify, seed_prior
+from vdsbi.inference import OBSERVATIONS, IdentifySettings, identify
+from vdsbi.inference._vehicle import seed_prior
 from vdsbi.simulator import PARAM_NAMES, SEED_CHANNELS, default_vehicle, make_model, seed_profile
 from vdsbi.simulator.measurement import SensorNoise, StiffnessMixtureNoise, StochasticSimulator
 

@@ -62,7 +62,7 @@ import outside_physics  # noqa: E402
 from vdsbi.discovery import diagnose_mismatch, effect_names  # noqa: E402
 from vdsbi.simulator import CHANNELS, PARAM_NAMES, Inputs, Vehicle, default_vehicle, random_profile, simulate  # noqa: E402
 from vdsbi.simulator._vehicle import VEHICLE_KEYS  # noqa: E402
-from vdsbi.simulator.effects import EFFECTS  # noqa: E402
+from vdsbi.simulator.effects import EFFECTS, EffectSettings  # noqa: E402
 from vdsbi.simulator.solvers import Solver  # noqa: E402
 
 NOISE_RANGES = {
@@ -162,9 +162,8 @@ def make_case(i: int, effects: tuple, seed: int, duration: float, folder: Path, 
         inputs = random_profile(key, duration, max_steer=steer)
         acting = inputs if kind is None else outside_physics.applied_inputs(kind, inputs)
         with jax.enable_x64(True), outside_physics.patched_tyres(kind, consts["mass"]):
-            ys, ok = simulate(
-                theta, acting, veh, v0=v0, effects=list(effects), effect_params=params, **solver_kw
-            )
+            enabled = EffectSettings(enabled=list(effects), params=params)
+            ys, ok = simulate(theta, acting, veh, v0=v0, effects=enabled, **solver_kw)
         if kind is not None:
             ys = outside_physics.recorded_readings(kind, ys, float(inputs.dt))
         if ok and np.all(np.isfinite(ys)) and ys[:, 5].min() > 4.0 and np.abs(ys[:, 3:5]).max() < 250:
@@ -219,7 +218,8 @@ def effect_signal(folder: Path, solver=None) -> float:
     theta = np.array([truth["theta"][k] for k in PARAM_NAMES])
     kw = {"v0": truth["v0"], **({} if solver is None else {"solver": solver})}
     with jax.enable_x64(True):
-        y_eff, _ = simulate(theta, inputs, veh, effects=truth["effects"], effect_params=truth["params"], **kw)
+        enabled = EffectSettings(enabled=truth["effects"], params=truth["params"])
+        y_eff, _ = simulate(theta, inputs, veh, effects=enabled, **kw)
         y_base, _ = simulate(theta, inputs, veh, **kw)
     sig = np.array([veh.noise_std.get(c, np.inf) for c in CHANNELS])
     return float(np.sum(((np.asarray(y_eff) - np.asarray(y_base)) / sig) ** 2))

@@ -56,6 +56,7 @@ from vdsbi.simulator import (  # noqa: E402
     PARAM_NAMES,
     SEED_CHANNELS,
     SEED_TRUE_THETA,
+    SeedManeuver,
     default_vehicle,
     make_model,
     seed_profile,
@@ -158,7 +159,9 @@ def main():
     model = make_model(vehicle)
     theta = jnp.asarray([SEED_TRUE_THETA[n] for n in PARAM_NAMES])
     inputs = (
-        seed_profile(duration=duration) if not args.quick else seed_profile(duration=1.0, torque_period=1.0)
+        seed_profile(duration=duration)
+        if not args.quick
+        else seed_profile(duration=1.0, maneuver=SeedManeuver(torque_period=1.0))
     )
 
     # ------------------------------------------------------------------ 1. F and the MC estimator

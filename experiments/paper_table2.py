@@ -22,12 +22,13 @@ import numpy as np
 from vdsbi.api.plots import pairplot
 from vdsbi.inference import (
     OBSERVATIONS,
+    Execution,
     IdentifySettings,
     Posterior,
     as_record,
     identify,
-    seed_prior,
 )
+from vdsbi.inference._vehicle import seed_prior
 from vdsbi.simulator import (
     NOMINAL_THETA,
     PARAM_NAMES,
@@ -168,9 +169,8 @@ def main(argv=None) -> dict:
 
     load_start = os.getloadavg()[0]
     t_start = time.perf_counter()
-    posterior, _, state = identify(
-        k_id, simulator, prior, x_o[0], settings, on_epoch_end=on_epoch, on_round_end=on_round
-    )
+    execution = Execution(on_epoch_end=on_epoch, on_round_end=on_round)
+    posterior, _, state = identify(k_id, simulator, prior, x_o[0], settings, execution=execution)
     t_train_end = time.perf_counter()
     t0 = time.perf_counter()
     samples = np.asarray(posterior.sample(jax.random.key(args.seed + 1), NUM_DRAWS))

@@ -18,6 +18,7 @@ from vdsbi.simulator import (
     simulate,
     theta_from_dict,
 )
+from vdsbi.simulator.effects import EffectSettings
 
 
 def drive_csv(
@@ -38,8 +39,7 @@ def drive_csv(
         inp,
         default_vehicle(),
         v0=10.0,
-        effects=list(effects),
-        effect_params=effects,
+        effects=EffectSettings(enabled=list(effects), params=effects),
     )
     assert ok
     rng = np.random.default_rng(seed)

@@ -12,10 +12,12 @@ import pytest
 
 from vdsbi import api
 from vdsbi.api._validate import PROFILE_V0
-from vdsbi.inference import IdentifySettings, StatisticsMLP, identify, seed_prior
+from vdsbi.inference import IdentifySettings, StatisticsMLP, identify
+from vdsbi.inference._vehicle import seed_prior
 from vdsbi.io import InputError, read_recording
 from vdsbi.io._errors import SimulationError
 from vdsbi.simulator import CHANNELS, PARAM_NAMES, SEED_TRUE_THETA, default_vehicle, seed_profile
+from vdsbi.simulator.effects import EffectSettings
 
 GOOD = Path(__file__).parent / "data" / "good"
 
@@ -112,6 +114,20 @@ def test_observability_result_renders_and_saves(tmp_path):
     assert res.markdown().startswith("# Observability: seed profile, 1 s, v0 = 10.5 m/s, seed noise")
     res.save(tmp_path)
     assert json.loads((tmp_path / "fisher.json").read_text())["maneuver"] == "seed profile, 1 s"
+
+
+def test_simulate_and_observability_take_the_effects_as_one_record():
+    # The effects and their values travel together: the drag slows the car in simulate, and
+    # its parameter joins the Fisher matrix at the given value in observability.
+    drag = EffectSettings(enabled=("aero_drag",), params={"aero_drag": {"CdA": 0.9}})
+    inputs = seed_profile(duration=1.0)
+    base = api.simulate(SEED_TRUE_THETA, inputs, v0=20.0)
+    dragged = api.simulate(SEED_TRUE_THETA, inputs, v0=20.0, effects=drag)
+    vx = CHANNELS.index("vx")
+    assert base.ok and dragged.ok and dragged.readings[-1, vx] < base.readings[-1, vx]
+    res = api.observability(default_vehicle(), inputs, effects=drag)
+    assert res.report["params"] == [*PARAM_NAMES, "aero_drag.CdA"] and res.report["effects"] == ["aero_drag"]
+    assert res.report["values"]["aero_drag.CdA"] == pytest.approx(0.9)
 
 
 def test_observability_rejects_a_noise_model_without_channels():

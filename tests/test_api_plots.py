@@ -4,7 +4,7 @@ prior box."""
 import numpy as np
 import pytest
 
-from vdsbi.api.plots import _mass_levels, display_unit, pairplot
+from vdsbi.api.plots import ParameterAxes, _mass_levels, display_unit, pairplot
 
 
 def test_stiffness_reads_in_kilonewtons():
@@ -29,8 +29,6 @@ def test_pairplot_over_the_prior_box_with_truth(tmp_path):
         ["l_f", "C_alpha_f"],
         tmp_path / "p.png",
         truth=np.array([1.5, np.nan]),
-        box=[(0.7, 2.0), (2e4, 2.2e5)],
-        units=["m", "N/rad"],
-        faded=[True, False],
+        axes=ParameterAxes(box=[(0.7, 2.0), (2e4, 2.2e5)], units=["m", "N/rad"], faded=[True, False]),
     )
     assert (tmp_path / "p.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

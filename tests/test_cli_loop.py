@@ -24,6 +24,7 @@ from vdsbi.simulator import (
     simulate,
     theta_from_dict,
 )
+from vdsbi.simulator.effects import EffectSettings
 
 NOISE = {"ax": 0.05, "ay": 0.05, "yaw_rate": 0.005, "omega_front": 0.1, "omega_rear": 0.1, "vx": 0.05}
 BIAS = {"ax": 0.3, "ay": -0.25, "yaw_rate": 0.0}
@@ -36,9 +37,8 @@ def biased(tmp_path_factory) -> tuple[Path, Path]:
     veh = default_vehicle()
     inp = seed_profile(duration=3.0)
     eff = {"sensor_bias": BIAS}
-    ys, ok = simulate(
-        theta_from_dict(SEED_TRUE_THETA), inp, veh, v0=10.0, effects=list(eff), effect_params=eff
-    )
+    effects = EffectSettings(enabled=list(eff), params=eff)
+    ys, ok = simulate(theta_from_dict(SEED_TRUE_THETA), inp, veh, v0=10.0, effects=effects)
     assert ok
     rng = np.random.default_rng(0)
     df = pd.DataFrame({"t": np.asarray(inp.ts), "steer": np.asarray(inp.steer)})

@@ -19,7 +19,7 @@ from vdsbi.simulator import (
     simulate,
 )
 from vdsbi.simulator._vehicle import VEHICLE_KEYS
-from vdsbi.simulator.effects import EFFECTS, AbstractEffect, Param, register_effect
+from vdsbi.simulator.effects import EFFECTS, AbstractEffect, EffectSettings, Param, register_effect
 
 NOISE = {"ax": 0.1, "ay": 0.1, "yaw_rate": 0.004, "omega_front": 0.1, "omega_rear": 0.1}
 
@@ -44,8 +44,7 @@ def _recording(vehicle: Vehicle, force: float):
             inputs,
             vehicle,
             v0=15.0,
-            effects=[TowPull.name],
-            effect_params={TowPull.name: {"force": force}},
+            effects=EffectSettings(enabled=[TowPull.name], params={TowPull.name: {"force": force}}),
         )
     assert ok
     rng = np.random.default_rng(0)

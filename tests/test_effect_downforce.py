@@ -2,6 +2,8 @@
 saturate later at speed; at its null it is the base model exactly; it is registered, searched
 and chosen by default where a drive is fast and uses more grip than the car's weight gives."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -15,6 +17,7 @@ from vdsbi.simulator import (
     GRAVITY,
     SEED_TRUE_THETA,
     Inputs,
+    SeedManeuver,
     default_vehicle,
     make_model,
     seed_profile,
@@ -24,7 +27,7 @@ from vdsbi.simulator import (
 )
 from vdsbi.simulator._effects._aero_drag import AIR_DENSITY
 from vdsbi.simulator._effects._downforce import REFERENCE_SPEED
-from vdsbi.simulator.effects import EFFECTS, effect_params_from
+from vdsbi.simulator.effects import EFFECTS, EffectSettings, effect_params_from
 from vdsbi.simulator.solvers import Solver
 
 VEHICLE = default_vehicle()
@@ -52,9 +55,8 @@ def test_null_reproduces_the_base_model_exactly(x64):
     assert ok
     # at coef = 0 the balance moves nothing
     for params in ({}, {"coef": 0.0, "balance_front": 0.3}):
-        ys, ok = simulate(
-            THETA, inputs, VEHICLE, v0=30.0, effects=("downforce",), effect_params={"downforce": params}
-        )
+        effects = EffectSettings(enabled=("downforce",), params={"downforce": params})
+        ys, ok = simulate(THETA, inputs, VEHICLE, v0=30.0, effects=effects)
         assert ok
         # identical but for rounding: the compiler may order the same sums differently
         np.testing.assert_allclose(ys, base, rtol=1e-13, atol=1e-13)
@@ -87,10 +89,11 @@ def test_the_tyres_saturate_later_at_speed(x64):
     steer = 0.03 * np.clip(t / 6.0, 0.0, 1.0)
     zeros = np.zeros_like(t)
     inputs = Inputs(0.0, dt, steer, zeros, zeros, speed=np.full_like(t, speed), accel=zeros)
-    kw = dict(longitudinal="speed", effects=("downforce",))
-    base, ok0 = simulate(THETA, inputs, VEHICLE, **kw)
+    effects = EffectSettings(enabled=("downforce",))
+    base, ok0 = simulate(THETA, inputs, VEHICLE, longitudinal="speed", effects=effects)
     params = {"downforce": {"coef": coef, "balance_front": _front_share()}}
-    loaded, ok1 = simulate(THETA, inputs, VEHICLE, effect_params=params, **kw)
+    loaded_effects = dataclasses.replace(effects, params=params)
+    loaded, ok1 = simulate(THETA, inputs, VEHICLE, longitudinal="speed", effects=loaded_effects)
     assert ok0 and ok1
     peak = lambda ys: np.max(np.abs(ys[:, AY]))
     assert peak(base) == pytest.approx(VEHICLE.friction * GRAVITY, rel=0.06)
@@ -102,7 +105,9 @@ def test_the_tyres_saturate_later_at_speed(x64):
 def test_gradient_with_respect_to_coef_matches_finite_differences(x64, getkey):
     model = make_model(VEHICLE, ("downforce",))
     # a fast second of the seed's maneuver: near the limit, so a_y and yaw rate feel the load
-    inputs = seed_profile(1.0, steer_amplitude=0.03, torque_period=1.0, steer_period=1.0)
+    inputs = seed_profile(
+        1.0, maneuver=SeedManeuver(steer_amplitude=0.03, torque_period=1.0, steer_period=1.0)
+    )
     weights = jax.random.normal(getkey(), (inputs.num_samples, 6), dtype=jnp.float64)
     theta = jnp.asarray(THETA)
 

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from vdsbi.simulator import SEED_TRUE_THETA, Inputs, default_vehicle, simulate, theta_from_dict
+from vdsbi.simulator.effects import EffectSettings
 
 
 def _ramp_steer(max_steer: float, duration: float = 8.0, dt: float = 0.005):
@@ -23,8 +24,9 @@ def test_peak_lateral_acceleration_scales_with_friction(x64, scale):
         inputs,
         vehicle,
         v0=15.0,
-        effects=("tyre_friction",),
-        effect_params={"tyre_friction": {"scale_front": scale, "scale_rear": scale}},
+        effects=EffectSettings(
+            enabled=("tyre_friction",), params={"tyre_friction": {"scale_front": scale, "scale_rear": scale}}
+        ),
     )
     assert ok0 and ok1
     peak = lambda ys: np.max(np.abs(ys[:, 1]))
@@ -43,8 +45,9 @@ def test_no_effect_far_below_the_limit(x64):
         inputs,
         vehicle,
         v0=15.0,
-        effects=("tyre_friction",),
-        effect_params={"tyre_friction": {"scale_front": 1.3, "scale_rear": 1.3}},
+        effects=EffectSettings(
+            enabled=("tyre_friction",), params={"tyre_friction": {"scale_front": 1.3, "scale_rear": 1.3}}
+        ),
     )
     assert np.max(np.abs(scaled[:, 1] - base[:, 1])) < 1e-3 * np.max(np.abs(base[:, 1]))
 

@@ -3,6 +3,7 @@
 import numpy as np
 
 from vdsbi.simulator import CHANNELS, SEED_TRUE_THETA, Inputs, default_vehicle, simulate, theta_from_dict
+from vdsbi.simulator.effects import EffectSettings
 
 
 def _step_steer(dt: float = 0.005, duration: float = 8.0):
@@ -13,9 +14,12 @@ def _step_steer(dt: float = 0.005, duration: float = 8.0):
 
 def _yaw(k: float | None):
     veh, theta = default_vehicle(), theta_from_dict(SEED_TRUE_THETA)
-    effects = () if k is None else ("yaw_inertia",)
-    params = None if k is None else {"yaw_inertia": {"dynamic_index": k}}
-    ys, ok = simulate(theta, _step_steer(), veh, v0=20.0, effects=effects, effect_params=params)
+    effects = (
+        EffectSettings()
+        if k is None
+        else EffectSettings(enabled=("yaw_inertia",), params={"yaw_inertia": {"dynamic_index": k}})
+    )
+    ys, ok = simulate(theta, _step_steer(), veh, v0=20.0, effects=effects)
     assert ok
     return ys[:, CHANNELS.index("yaw_rate")]
 

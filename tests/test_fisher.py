@@ -15,6 +15,7 @@ from vdsbi.simulator import (
     PARAM_NAMES,
     SEED_CHANNELS,
     SEED_TRUE_THETA,
+    SeedManeuver,
     default_vehicle,
     make_model,
     seed_profile,
@@ -57,7 +58,7 @@ def test_noise_floor_bounds_information_at_zero_crossings(x64):
 def short_case():
     """Float64 Fisher of the 6 θ on the first 1 s of the seed maneuver (braking part shifted in)."""
     with jax.enable_x64(True):
-        inputs = seed_profile(duration=1.0, torque_period=1.0)
+        inputs = seed_profile(duration=1.0, maneuver=SeedManeuver(torque_period=1.0))
         model = make_model(default_vehicle())
         fisher = model_fisher(model, jnp.asarray(THETA), inputs, 10.5)
         yield model, inputs, fisher

@@ -9,9 +9,10 @@ from conftest import tree_allclose
 
 from vdsbi.inference import (
     BoxPrior,
+    Execution,
     IdentityEmbedding,
     NPEConfig,
-    SequentialSettings,
+    RoundSchedule,
     SplineFlowSettings,
     TrainingSettings,
     _train,
@@ -20,7 +21,7 @@ from vdsbi.inference import (
     save_state,
 )
 from vdsbi.inference._build import build_flow
-from vdsbi.inference._config import LeakPenalty, Truncation, WeightAveraging
+from vdsbi.inference._config import LeakPenalty, SequentialSettings, Truncation, WeightAveraging
 from vdsbi.inference._loss import (
     AtomicLoss,
     MaximumLikelihoodLoss,
@@ -270,8 +271,7 @@ def test_nonfinite_and_invalid_simulations_are_excluded_and_counted(getkey):
         prior,
         jnp.zeros(2),
         embedding=IdentityEmbedding(2),
-        rounds=1,
-        sims_per_round=400,
+        schedule=RoundSchedule(rounds=1, sims_per_round=400),
         config=TINY,
     )
     th, valid = seen["theta"], seen["valid"]
@@ -284,18 +284,67 @@ def test_nonfinite_and_invalid_simulations_are_excluded_and_counted(getkey):
     assert np.all(np.isfinite(state.x))
 
 
+def test_schedule_and_execution_drive_the_rounds_and_their_callbacks(getkey):
+    # One int per round, and every callback of an Execution, in the order a round runs them:
+    # simulate, train epoch by epoch, then the round's end with its new state.
+    prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
+    events = []
+    execution = Execution(
+        on_simulate=lambda n: events.append(("simulate", n)),
+        on_epoch_end=lambda r, epoch, train, val: events.append(("epoch", r)),
+        on_round_end=lambda s: events.append(("round", s.round)),
+    )
+    schedule = RoundSchedule(rounds=2, sims_per_round=[120, 140])
+    cfg = _with(TINY, max_epochs=2, patience=5)
+    _, state = apt(
+        getkey(),
+        _gauss_sim,
+        prior,
+        jnp.zeros(2),
+        embedding=IdentityEmbedding(2),
+        schedule=schedule,
+        config=cfg,
+        execution=execution,
+    )
+    assert [h["num_simulations"] for h in state.history] == [120, 140]
+    assert events == [
+        ("simulate", 120),
+        ("epoch", 0),
+        ("epoch", 0),
+        ("round", 1),
+        ("simulate", 140),
+        ("epoch", 1),
+        ("epoch", 1),
+        ("round", 2),
+    ]
+    with pytest.raises(ValueError, match="2 entries for 3 rounds"):
+        apt(
+            getkey(),
+            _gauss_sim,
+            prior,
+            jnp.zeros(2),
+            embedding=IdentityEmbedding(2),
+            schedule=dataclasses.replace(schedule, rounds=3),
+            config=cfg,
+        )
+
+
 def test_resume_from_state_is_bit_identical(tmp_path, getkey):
     prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
     cfg = _with(TINY, max_epochs=2)
-    kw = dict(embedding=IdentityEmbedding(2), sims_per_round=200, config=cfg)
+    kw = dict(embedding=IdentityEmbedding(2), config=cfg)
+    one, two = RoundSchedule(rounds=1, sims_per_round=200), RoundSchedule(rounds=2, sims_per_round=200)
     key, x_o = getkey(), jnp.array([0.2, -0.1])
-    post_full, state_full = apt(key, _gauss_sim, prior, x_o, rounds=2, **kw)
+    post_full, state_full = apt(key, _gauss_sim, prior, x_o, schedule=two, **kw)
 
-    saved = []
-    apt(key, _gauss_sim, prior, x_o, rounds=1, on_round_end=lambda s: save_state(tmp_path / "s.npz", s), **kw)
+    checkpoint = Execution(on_round_end=lambda s: save_state(tmp_path / "s.npz", s))
+    apt(key, _gauss_sim, prior, x_o, schedule=one, execution=checkpoint, **kw)
     saved = load_state(tmp_path / "s.npz")
     assert saved.round == 1
-    post_res, state_res = apt(jax.random.key(999), _gauss_sim, prior, x_o, rounds=2, state=saved, **kw)
+    resumed = Execution(state=saved)
+    post_res, state_res = apt(
+        jax.random.key(999), _gauss_sim, prior, x_o, schedule=two, execution=resumed, **kw
+    )
 
     assert state_res.history[1]["loss"] == "AtomicLoss"
     assert state_res.history[1]["box_mass"] == 1.0  # TINY's logit map keeps all mass in the box
@@ -312,7 +361,8 @@ def test_apt_rounds_compile_a_bounded_number_of_shapes(getkey, monkeypatch):
     # trace (the regression test optax/blackjax keep for their steps).
     prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
     cfg = _with(TINY, max_epochs=2)
-    kw = dict(embedding=IdentityEmbedding(2), rounds=3, sims_per_round=[150, 170, 190], config=cfg)
+    schedule = RoundSchedule(rounds=3, sims_per_round=[150, 170, 190])
+    kw = dict(embedding=IdentityEmbedding(2), schedule=schedule, config=cfg)
     # one trace per loss (ML in round 1, atomic after): blocks have one padded length
     counted = [_counted(monkeypatch, "train_steps", 2), _counted(monkeypatch, "eval_steps", 3)]
     apt(getkey(), _gauss_sim, prior, jnp.zeros(2), **kw)
@@ -351,8 +401,7 @@ def test_later_rounds_wait_for_their_new_data_only(over_new_data, getkey):
         prior,
         jnp.zeros(2),
         embedding=IdentityEmbedding(2),
-        rounds=4,
-        sims_per_round=160,
+        schedule=RoundSchedule(rounds=4, sims_per_round=160),
         config=cfg,
     )
     hist = state.history
@@ -372,7 +421,9 @@ def test_cosine_schedule_runs_its_course_without_recompiling(getkey, monkeypatch
     prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
     cfg = _with(TINY, max_epochs=4, patience=6, cosine_decay=True)
     _counted(monkeypatch, "train_steps", 2)  # one per loss, not one per epoch
-    kw = dict(embedding=IdentityEmbedding(2), rounds=2, sims_per_round=160, config=cfg)
+    kw = dict(
+        embedding=IdentityEmbedding(2), schedule=RoundSchedule(rounds=2, sims_per_round=160), config=cfg
+    )
     _, state = apt(getkey(), _gauss_sim, prior, jnp.zeros(2), **kw)
     first, second = state.history
     assert first["epochs"] == 4  # patience 6 > 4 epochs: no early stop
@@ -386,7 +437,9 @@ def test_later_rounds_are_capped_in_passes_over_their_new_data(getkey):
     # cut off by its cap has not converged, so the next one waits the full patience.
     prior = BoxPrior(-jnp.ones(2), jnp.ones(2))
     cfg = _with(TINY, max_epochs=5, patience=10, later_max_epochs=8)
-    kw = dict(embedding=IdentityEmbedding(2), rounds=4, sims_per_round=160, config=cfg)
+    kw = dict(
+        embedding=IdentityEmbedding(2), schedule=RoundSchedule(rounds=4, sims_per_round=160), config=cfg
+    )
     _, state = apt(getkey(), _gauss_sim, prior, jnp.zeros(2), **kw)
     assert [h["max_epochs"] for h in state.history] == [5, 4, 3, 2]
     assert [h["epochs"] for h in state.history] == [5, 4, 3, 2]  # patience 10: no early stop
@@ -542,8 +595,7 @@ def test_penalty_at_the_observation_keeps_more_of_its_posterior_in_the_box(getke
             prior,
             x_o,
             embedding=IdentityEmbedding(2),
-            rounds=2,
-            sims_per_round=300,
+            schedule=RoundSchedule(rounds=2, sims_per_round=300),
             config=cfg,
         )
         mass[at] = float(state.flow.box_mass(jax.random.key(0), state.flow.context(x_o), 20_000))

@@ -13,6 +13,7 @@ from vdsbi.inference import (
     IdentityEmbedding,
     NPEConfig,
     Posterior,
+    RoundSchedule,
     TrainingSettings,
     apt,
     npe,
@@ -132,7 +133,6 @@ def test_posterior_file_round_trip_and_bad_configs(getkey, tmp_path):
             prior,
             jnp.zeros(2),
             embedding=IdentityEmbedding(2),
-            rounds=2,
-            sims_per_round=100,
+            schedule=RoundSchedule(rounds=2, sims_per_round=100),
             config=NPEConfig(flow=FlowMatchingSettings()),
         )

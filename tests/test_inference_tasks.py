@@ -6,7 +6,7 @@ import scipy.stats
 
 from benchmarks.tasks import TASKS, get_task, slcp_log_likelihood
 from vdsbi.diagnostics import c2st
-from vdsbi.inference import IdentityEmbedding, NPEConfig, TrainingSettings, apt
+from vdsbi.inference import IdentityEmbedding, NPEConfig, RoundSchedule, TrainingSettings, apt
 from vdsbi.inference._config import WeightAveraging
 
 
@@ -106,8 +106,7 @@ def test_two_moons_apt_reaches_c2st_below_078():
         task.prior,
         x_o,
         embedding=IdentityEmbedding(2),
-        rounds=2,
-        sims_per_round=1500,
+        schedule=RoundSchedule(rounds=2, sims_per_round=1500),
         config=cfg,
     )
     ref = task.reference_posterior_samples(1, 2000)

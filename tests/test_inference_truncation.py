@@ -13,6 +13,7 @@ from vdsbi.inference import (
     BoxPrior,
     IdentityEmbedding,
     NPEConfig,
+    RoundSchedule,
     SplineFlowSettings,
     TrainingSettings,
     _truncation,
@@ -114,10 +115,8 @@ def test_tsnpe_rounds_propose_from_the_truncated_prior(getkey):
         prior,
         x_o,
         embedding=emb,
-        rounds=2,
-        sims_per_round=500,
+        schedule=RoundSchedule(rounds=2, sims_per_round=500, truncate=True),
         config=config,
-        truncate=True,
     )
     later = state.history[1]
     assert later["proposal"] == "truncated_prior" and later["num_filled"] == 0

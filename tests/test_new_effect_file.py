@@ -40,14 +40,14 @@ SCRIPT = textwrap.dedent(
     from vdsbi.io import build_recording
     from vdsbi.simulator import CHANNELS, SEED_TRUE_THETA, default_vehicle, random_profile, simulate
     from vdsbi.simulator import theta_from_dict
-    from vdsbi.simulator.effects import EFFECTS
+    from vdsbi.simulator.effects import EFFECTS, EffectSettings
 
     out = Path(sys.argv[1])
     noise = {"ax": 0.05, "ay": 0.05, "yaw_rate": 0.003, "omega_front": 0.1, "omega_rear": 0.1}
     inputs = random_profile(jax.random.key(5), 8.0)
     ys, ok = simulate(
         theta_from_dict(SEED_TRUE_THETA), inputs, default_vehicle(), v0=15.0,
-        effects=["tow_pull"], effect_params={"tow_pull": {"force": 800.0}},
+        effects=EffectSettings(enabled=["tow_pull"], params={"tow_pull": {"force": 800.0}}),
     )
     rng = np.random.default_rng(0)
     cols = {"t": np.asarray(inputs.ts), "steer": np.asarray(inputs.steer),

@@ -14,12 +14,12 @@ from vdsbi.simulator import (
     PARAM_NAMES,
     SEED_TRUE_THETA,
     Inputs,
-    constant_profile,
     default_vehicle,
     make_model,
     seed_profile,
     solve,
 )
+from vdsbi.simulator._profiles import constant_profile
 from vdsbi.simulator.measurement import SEED_RELATIVE_NOISE
 from vdsbi.simulator.solvers import RK4, Solver
 

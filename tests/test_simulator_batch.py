@@ -23,6 +23,7 @@ from vdsbi.simulator import (
     solve_batch,
 )
 from vdsbi.simulator._solve import TRACE_COUNT
+from vdsbi.simulator.effects import EffectSettings
 
 VEHICLE = default_vehicle()
 MODEL = make_model(VEHICLE, ["aero_drag"])
@@ -129,11 +130,14 @@ def with_theta(name, value):
         (dict(theta=with_theta("C_kappa_f", 0.0)), "C_kappa_f"),
         (dict(theta=with_theta("h_cog", np.nan)), "h_cog"),
         (dict(theta=np.ones(5)), "theta"),
-        (dict(effects=["aero_dragg"]), "aero_dragg"),
-        (dict(effects=["aero_drag", "aero_drag"]), "duplicate"),
-        (dict(effects=["aero_drag"], effect_params={"aero_drag": {"cda": 0.5}}), "cda"),
-        (dict(effects=["aero_drag"], effect_params={"aero_drag": {"CdA": np.nan}}), "aero_drag"),
-        (dict(effect_params={"road_grade": {"grade": 0.01}}), "road_grade"),
+        (dict(effects=EffectSettings(enabled=["aero_dragg"])), "aero_dragg"),
+        (dict(effects=EffectSettings(enabled=["aero_drag", "aero_drag"])), "duplicate"),
+        (dict(effects=EffectSettings(enabled=["aero_drag"], params={"aero_drag": {"cda": 0.5}})), "cda"),
+        (
+            dict(effects=EffectSettings(enabled=["aero_drag"], params={"aero_drag": {"CdA": np.nan}})),
+            "aero_drag",
+        ),
+        (dict(effects=EffectSettings(params={"road_grade": {"grade": 0.01}})), "road_grade"),
         (dict(v0=-3.0), "v0"),
         (dict(v0=float("nan")), "v0"),
     ],

@@ -11,6 +11,7 @@ from vdsbi.cli import main
 from vdsbi.io import read_recording, read_vehicle
 from vdsbi.problem import smoothed_yaw_rate
 from vdsbi.simulator import CHANNELS, PARAM_NAMES, SEED_TRUE_THETA, seed_profile, simulate
+from vdsbi.simulator.effects import EffectSettings
 from vdsbi.simulator.models import steady_lateral_state
 
 GOOD = Path(__file__).parent / "data" / "good"
@@ -62,8 +63,7 @@ def test_recording_inputs_theta_file_effects_and_noise(tmp_path):
         src.inputs(),
         vehicle,
         v0=v0,
-        effects=["aero_drag"],
-        effect_params={"aero_drag": {"CdA": 0.6}},
+        effects=EffectSettings(enabled=["aero_drag"], params={"aero_drag": {"CdA": 0.6}}),
         lateral0=lateral0,
     )
     resid = rec.measured(CHANNELS) - clean

@@ -16,6 +16,7 @@ from vdsbi.simulator import (
     PARAM_NAMES,
     SEED_TRUE_THETA,
     Inputs,
+    SeedManeuver,
     default_vehicle,
     make_model,
     seed_profile,
@@ -24,7 +25,14 @@ from vdsbi.simulator import (
     theta_from_dict,
 )
 from vdsbi.simulator._effects._aero_drag import AIR_DENSITY
-from vdsbi.simulator.effects import EFFECTS, AbstractEffect, Param, effect_params_from, register_effect
+from vdsbi.simulator.effects import (
+    EFFECTS,
+    AbstractEffect,
+    EffectSettings,
+    Param,
+    effect_params_from,
+    register_effect,
+)
 from vdsbi.simulator.solvers import Solver
 
 VEHICLE = default_vehicle()
@@ -293,8 +301,7 @@ def test_a_new_effect_takes_one_class_and_one_line(x64):
             straight,
             VEHICLE,
             v0=V0,
-            effects=["test_tow_force"],
-            effect_params={"test_tow_force": {"force": 450.0}},
+            effects=EffectSettings(enabled=["test_tow_force"], params={"test_tow_force": {"force": 450.0}}),
             solver=SOLVER,
         )
         assert ok
@@ -334,14 +341,13 @@ def test_every_effect_runs_a_float64_fit_on_float32_inputs_without_casting_warni
     parameters into them must say how (JAX warns of an unsafe cast, and means to make it an error)."""
     import warnings
 
-    inputs = seed_profile(1.0, 100.0, steer_amplitude=0.04, t0=0.2)
+    inputs = seed_profile(1.0, 100.0, maneuver=SeedManeuver(steer_amplitude=0.04), t0=0.2)
     inputs = jax.tree.map(lambda a: jnp.asarray(a, jnp.float32) if isinstance(a, jax.Array) else a, inputs)
     with jax.enable_x64(True), warnings.catch_warnings():
         warnings.simplefilter("error", FutureWarning)
         theta = jnp.asarray(theta_from_dict(SEED_TRUE_THETA), jnp.float64)
         for name, effect in EFFECTS.items():
             typical = {name: {p: float(hi) for p, (_, hi) in zip(effect.param_names, effect.typical)}}
-            ys, ok = simulate(
-                theta, inputs, default_vehicle(), v0=10.0, effects=[name], effect_params=typical
-            )
+            effects = EffectSettings(enabled=[name], params=typical)
+            ys, ok = simulate(theta, inputs, default_vehicle(), v0=10.0, effects=effects)
             assert ok and np.isfinite(np.asarray(ys)).all(), name

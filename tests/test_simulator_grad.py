@@ -5,7 +5,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vdsbi.simulator import PARAM_NAMES, SEED_TRUE_THETA, default_vehicle, make_model, seed_profile, solve
+from vdsbi.simulator import (
+    PARAM_NAMES,
+    SEED_TRUE_THETA,
+    SeedManeuver,
+    default_vehicle,
+    make_model,
+    seed_profile,
+    solve,
+)
 from vdsbi.simulator.effects import EFFECTS, effect_params_from
 from vdsbi.simulator.solvers import Solver
 
@@ -16,7 +24,7 @@ def test_grad_matches_central_differences(x64, getkey):
     vehicle = default_vehicle()
     model = make_model(vehicle, NAMES)
     # 1 s with a gas-to-brake switch at 0.5 s and half a steer period: every parameter acts
-    inputs = seed_profile(1.0, torque_period=1.0, steer_period=1.0)
+    inputs = seed_profile(1.0, maneuver=SeedManeuver(torque_period=1.0, steer_period=1.0))
     # every effect on, at a non-null point inside its typical range
     values = {
         cls.name: {p: lo + 0.7 * (hi - lo) for p, (lo, hi) in zip(cls.param_names, cls.typical)}

@@ -14,7 +14,6 @@ from vdsbi.simulator import (
     PARAM_NAMES,
     SEED_TRUE_THETA,
     Inputs,
-    constant_profile,
     default_vehicle,
     make_model,
     random_profile,
@@ -24,6 +23,7 @@ from vdsbi.simulator import (
     solve_batch,
 )
 from vdsbi.simulator._model import Args
+from vdsbi.simulator._profiles import constant_profile
 from vdsbi.simulator._solve import TRACE_COUNT, check_inputs
 from vdsbi.simulator.effects import effect_params_from
 from vdsbi.simulator.models import steady_lateral_state

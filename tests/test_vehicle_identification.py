@@ -8,11 +8,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vdsbi.inference import StatisticsMLP, TrajectoryCNN, seed_prior
+from vdsbi.inference import StatisticsMLP, TrajectoryCNN
 from vdsbi.inference._cnn import CNNEmbedding
 from vdsbi.inference._embeddings import embedding_from_spec
 from vdsbi.inference._standardize import TrajectoryStandardization
 from vdsbi.inference._summaries import summary_statistics
+from vdsbi.inference._vehicle import seed_prior
 
 
 def test_cnn_embedding_any_length_and_reconstructable(getkey):

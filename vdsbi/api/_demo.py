@@ -92,6 +92,7 @@ def demo_recording(out: str | os.PathLike, *, duration: float, seed: int) -> dic
         simulate,
         theta_from_dict,
     )
+    from ..simulator.effects import EffectSettings
 
     out = Path(out)
     veh = default_vehicle()
@@ -104,8 +105,7 @@ def demo_recording(out: str | os.PathLike, *, duration: float, seed: int) -> dic
             inp,
             veh,
             v0=DEMO_V0,
-            effects=list(CONCEALED),
-            effect_params=CONCEALED,
+            effects=EffectSettings(enabled=list(CONCEALED), params=CONCEALED),
         )
         if ok and float(np.min(np.asarray(ys)[:, CHANNELS.index("vx")])) > 5.0:
             break

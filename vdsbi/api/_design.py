@@ -120,7 +120,7 @@ def design(
     with jax.enable_x64(True):
         import jax.numpy as jnp
 
-        from ..diagnostics import Maneuver
+        from ..diagnostics import Maneuver, MeasurementModel
         from ..simulator import make_model
 
         model, th = make_model(veh), jnp.asarray(th, dtype=float)
@@ -128,8 +128,8 @@ def design(
         start = Maneuver.seed_like(limits)
         res = _optimise(problem, start, steps, learning_rate, log or (lambda s: None))
         designed, v0 = res.maneuver.inputs(limits), float(res.maneuver.initial_speed(limits))
-        fisher = dict(channels=channels, noise=sensor)
-        bounds = _bounds(model, th, limits, (start, res.maneuver), fisher, target, noise)
+        measurement = MeasurementModel(channels=channels, noise=sensor)
+        bounds = _bounds(model, th, limits, (start, res.maneuver), measurement, target, noise)
         rec = _recording(model, th, designed, v0)
         described = res.maneuver.describe(limits)
     return DesignReport(bounds, _info(target, described, limits, steps, res), rec)
@@ -157,7 +157,7 @@ def _problem(model, theta, limits, target: str, channels, noise):
     )
 
 
-def _bounds(model, theta, limits, maneuvers: tuple, fisher: dict, target: str, noise: NoiseName) -> dict:
+def _bounds(model, theta, limits, maneuvers: tuple, measurement, target: str, noise: NoiseName) -> dict:
     """bounds.json (`noise`: the noise model's name): the Fisher reports of `_reports` for
     ``maneuvers = (start, designed)``, the improvement per parameter (CRB std before / after)
     and the designed maneuver's limits check."""
@@ -165,8 +165,8 @@ def _bounds(model, theta, limits, maneuvers: tuple, fisher: dict, target: str, n
 
     start, maneuver = maneuvers
     designed, v0 = maneuver.inputs(limits), float(maneuver.initial_speed(limits))
-    bounds = {"target": target, "noise": noise, "channels": fisher["channels"]}
-    bounds |= _reports(model, theta, limits, start, maneuver, fisher)
+    bounds = {"target": target, "noise": noise, "channels": measurement.channels}
+    bounds |= _reports(model, theta, limits, start, maneuver, measurement)
     before, after = bounds["before"]["crb_std"], bounds["after"]["crb_std"]
     bounds["improvement"] = {n: before[n] / after[n] for n in before}
     bounds["limits_check"] = check_limits(model, theta, designed, v0, limits)
@@ -206,7 +206,7 @@ def _optimise(problem, start, steps: int, learning_rate: float, say: Callable[[s
         raise InputError("limits", "value", str(err)) from None
 
 
-def _reports(model, theta, limits, start, designed, fisher: dict) -> dict[str, dict]:
+def _reports(model, theta, limits, start, designed, measurement) -> dict[str, dict]:
     """Fisher reports ("before": the seed's profile, "start", "after": designed), with log det F."""
     from ..diagnostics import fisher_report, model_fisher
     from ..simulator import seed_profile
@@ -222,7 +222,7 @@ def _reports(model, theta, limits, start, designed, fisher: dict) -> dict[str, d
     }
     reports = {}
     for key, (inputs, v0, label) in maneuvers.items():
-        rep = fisher_report(model_fisher(model, theta, inputs, v0, **fisher))
+        rep = fisher_report(model_fisher(model, theta, inputs, v0, measurement=measurement))
         rep["maneuver"], rep["v0"] = label, v0
         rep["logdet_scaled"] = float(np.sum(np.log(rep["eigenvalues"])))
         reports[key] = rep

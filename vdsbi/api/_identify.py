@@ -323,7 +323,7 @@ def _start(out: Path, run_info: dict, resume: bool, say: Callable[[str], None]):
 
 def _train(key, prob: Problem, box: Box, effects, settings, state, out, progress: Progress):
     """`vdsbi.inference.identify_problem` with progress bars, per-round checkpoints and messages."""
-    from ..inference import BoxPrior, identify_problem, save_state
+    from ..inference import BoxPrior, Execution, identify_problem, save_state
 
     bars, say = Bars(settings.rounds, progress.bars), progress.say
 
@@ -342,17 +342,10 @@ def _train(key, prob: Problem, box: Box, effects, settings, state, out, progress
 
     prior = BoxPrior(np.asarray(box.low), np.asarray(box.high), names=box.names)
     try:
-        return identify_problem(
-            key,
-            prob,
-            prior,
-            settings,
-            effects=effects,
-            on_round_end=round_end,
-            on_epoch_end=bars.epoch,
-            on_simulate=bars.simulate,
-            state=state,
+        execution = Execution(
+            on_round_end=round_end, on_epoch_end=bars.epoch, on_simulate=bars.simulate, state=state
         )
+        return identify_problem(key, prob, prior, settings, effects=effects, execution=execution)
     except SimulationError as err:
         # A property of this recording, not a bug: say so in one line.
         raise InputError(

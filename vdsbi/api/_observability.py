@@ -13,6 +13,7 @@ from typing import Any
 from ..io import InputError, Recording
 from ..problem import make_problem
 from ..simulator import CHANNELS, SEED_CHANNELS, Inputs, Vehicle
+from ..simulator.effects import EffectSettings
 from ..simulator.models import LongitudinalMode
 from ._validate import (
     PROFILE_V0,
@@ -65,8 +66,7 @@ def observability(
     v0: float | None = None,
     channels: Sequence[str] | None = None,
     noise: NoiseName = "seed",
-    effects: Sequence[str] = (),
-    effect_params: Mapping[str, Mapping[str, float]] | None = None,
+    effects: EffectSettings = EffectSettings(),
     label: str | None = None,
 ) -> ObservabilityResult:
     """Fisher information of the parameters for `maneuver`, by forward-mode autodiff through
@@ -83,8 +83,8 @@ def observability(
         channels: measured channels.
         noise: "seed" (relative) or "vehicle" (additive noise_std; channels without one are
             left out).
-        effects, effect_params: effects to enable (their parameters join the matrix) and
-            {effect: {param: value}}.
+        effects: the effects to enable (their parameters join the matrix) and their parameter
+            values (`EffectSettings`).
         label: the maneuver's name in the report (default: the recording's file, or "inputs").
 
     Raises:
@@ -97,7 +97,7 @@ def observability(
     sensor = sensor_noise(noise, veh, source)
     channels, dropped = noise_channels(channels, sensor, source)
     th = checked_theta(theta, veh)
-    model, params = _model(veh, effects, effect_params, mode)
+    model, params = _model(veh, effects, mode)
     rep = _report(model, th, inputs, v0, params, channels, sensor)
     if problem is not None:
         rep |= _identifiability(problem, th, veh)
@@ -105,7 +105,7 @@ def observability(
     rep["v0"] = v0
     rep["noise"] = noise
     rep["channels_without_noise_std"] = dropped
-    rep["effects"] = list(effects)
+    rep["effects"] = list(effects.enabled)
     return ObservabilityResult(rep)
 
 
@@ -139,7 +139,7 @@ def _report(model, theta, inputs, v0, params, channels, noise) -> dict:
     """`fisher_report` of the maneuver in float64."""
     import jax
 
-    from ..diagnostics import fisher_report, model_fisher
+    from ..diagnostics import MeasurementModel, fisher_report, model_fisher
 
     with jax.enable_x64(True):
         import jax.numpy as jnp
@@ -150,8 +150,7 @@ def _report(model, theta, inputs, v0, params, channels, noise) -> dict:
             inputs,
             v0,
             tuple(jnp.asarray(p, dtype=float) for p in params),
-            channels=channels,
-            noise=noise,
+            measurement=MeasurementModel(channels=channels, noise=noise),
         )
         return fisher_report(fisher)
 
@@ -170,16 +169,14 @@ def _identifiability(problem, theta, vehicle: Vehicle) -> dict:
         }
 
 
-def _model(
-    vehicle: Vehicle, effects: Sequence[str], effect_params, longitudinal: LongitudinalMode = "torque"
-):
+def _model(vehicle: Vehicle, effects: EffectSettings, longitudinal: LongitudinalMode = "torque"):
     """The model with `effects` enabled and the effects' parameter vectors."""
     from ..simulator import make_model
     from ..simulator.effects import effect_params_from
 
     try:
-        model = make_model(vehicle, list(effects), longitudinal=longitudinal)
-        _, params = effect_params_from(list(effects), effect_params)
+        model = make_model(vehicle, list(effects.enabled), longitudinal=longitudinal)
+        _, params = effect_params_from(list(effects.enabled), effects.params)
     except ValueError as err:
         raise InputError("arguments", "value", str(err)) from None
     return model, params

@@ -6,7 +6,7 @@ from __future__ import annotations
 class Bars:
     """tqdm bars per round: simulations, then training epochs with the validation loss.
 
-    The methods are `vdsbi.inference.identify`'s hooks (`on_simulate`, `on_epoch_end`, and
+    The methods are `vdsbi.inference.Execution`'s callbacks (`on_simulate`, `on_epoch_end`, and
     `round_end` from `on_round_end`); with `enabled=False` they do nothing.
     """
 

@@ -11,6 +11,7 @@ import numpy as np
 from ..io import InputError, Recording
 from ..problem import longitudinal_mode, measured_longitudinal, smoothed_yaw_rate
 from ..simulator import CHANNELS, Inputs, Vehicle
+from ..simulator.effects import EffectSettings
 from ..simulator.models import (
     AbstractVehicleModel,
     LongitudinalChoice,
@@ -83,8 +84,7 @@ def simulate(
     vehicle: str | os.PathLike | Vehicle | None = None,
     *,
     v0: float | None = 10.0,
-    effects: Sequence[str] = (),
-    effect_params: Mapping[str, Mapping[str, float]] | None = None,
+    effects: EffectSettings = EffectSettings(),
     noise: NoiseName = "none",
     seed: int = 0,
     longitudinal: LongitudinalChoice = "auto",
@@ -96,7 +96,7 @@ def simulate(
         inputs: an `Inputs` profile, a `Recording` whose steer and torques drive the model, or
             None for the seed profile (`vdsbi.simulator.seed_profile`).
         v0: initial speed, m/s; None takes a recording's first speed, or the seed profile's.
-        effects, effect_params: effects to enable and {effect: {param: value}}.
+        effects: the effects to enable and their parameter values (`EffectSettings`).
         noise: sensor noise, "none", "seed" (relative) or "vehicle" (the vehicle's noise_std).
         seed: seed of the noise.
         longitudinal: with a recording, "torque", "speed" (follow its measured speed) or
@@ -129,7 +129,6 @@ def simulate(
         veh,
         v0=v0,
         effects=effects,
-        effect_params=effect_params,
         longitudinal=mode,
         lateral0=lateral0,
     )

@@ -22,7 +22,7 @@ from ..io import (
 from ..simulator import PARAM_NAMES, PARAM_UNITS
 from ._export import EXPORT_FORMATS as EXPORT_FORMATS, FILE_NAMES, ExportFormat, export
 from ._pages import identify_page
-from .plots import pairplot, ppc_plot
+from .plots import ParameterAxes, pairplot, ppc_plot
 
 #: Files `identify` writes into its output directory (besides `CHECKPOINT`).
 RUN_FILE = "run.json"
@@ -101,10 +101,12 @@ def plot_posterior(
         path,
         truth=pick(truth),
         title=title or f"posterior from {summary['recording']}",
-        box=[params[n]["prior"] for n in names],
-        units=[params[n]["unit"] for n in names],
+        axes=ParameterAxes(
+            box=[params[n]["prior"] for n in names],
+            units=[params[n]["unit"] for n in names],
+            faded=[_uninformed(params[n]) for n in names],
+        ),
         reference=pick(given),
-        faded=[_uninformed(params[n]) for n in names],
     )
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Sequence
 from typing import Any
@@ -38,6 +39,23 @@ def display_unit(unit: str) -> tuple[float, str]:
     return SCALED_UNITS.get(unit, (1.0, unit.replace("^2", "²")))
 
 
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ParameterAxes:
+    """How a `pairplot` draws each parameter's axes (one entry per parameter; None: not used).
+
+    Attributes:
+        box: (low, high) per parameter: the axes span the prior box, so a posterior piled at an
+            edge shows as such (None: the samples' range).
+        units: unit per parameter, shown in the axis labels; N and N/rad are shown in kN and
+            kN/rad.
+        faded: parameters drawn grey (the drive cannot inform them).
+    """
+
+    box: Sequence[tuple[float, float]] | None = None
+    units: Sequence[str] | None = None
+    faded: Sequence[bool] | None = None
+
+
 def pairplot(
     samples: np.ndarray,
     labels: Sequence[str],
@@ -45,22 +63,18 @@ def pairplot(
     truth: np.ndarray | None = None,
     title: str | None = None,
     *,
-    box: Sequence[tuple[float, float]] | None = None,
-    units: Sequence[str] | None = None,
+    axes: ParameterAxes = ParameterAxes(),
     reference: np.ndarray | None = None,
-    faded: Sequence[bool] | None = None,
 ) -> None:
     """Pair plot of (N, d) `samples`: histograms on the diagonal, density contours (50 and 90 %
     of the mass) over faint points below it.
 
     Args:
         truth: (d,) values marked in red (NaN: unknown, not marked).
-        box: per parameter (low, high): the axes span the prior box, so a posterior piled at an
-            edge shows as such.
-        units: per parameter unit; N and N/rad are shown in kN and kN/rad.
+        axes: each parameter's span, unit and whether it is drawn grey (`ParameterAxes`).
         reference: (d,) values marked in green (e.g. a lab's).
-        faded: parameters drawn grey (the drive cannot inform them).
     """
+    box, units, faded = axes.box, axes.units, axes.faded
     d = samples.shape[1]
     scale = np.array([display_unit(u)[0] for u in units]) if units is not None else np.ones(d)
     shown = [f"{n} [{display_unit(u)[1]}]" for n, u in zip(labels, units)] if units is not None else labels

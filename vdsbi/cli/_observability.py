@@ -7,6 +7,7 @@ import argparse
 from .. import api
 from ..io import InputError, output_dir, read_recording
 from ..simulator import SEED_TRUE_THETA, seed_profile
+from ..simulator.effects import EffectSettings
 from . import _args
 
 
@@ -60,7 +61,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args) -> int:
     theta = _args.theta(args.theta, SEED_TRUE_THETA)
     effects = _args.effect_names(args.effects)
-    params = _args.effects(args.effect_params, "--effect-params")[1] if args.effect_params else None
+    params = _args.effects(args.effect_params, "--effect-params")[1] if args.effect_params else {}
     if args.inputs:
         maneuver, label = read_recording(args.inputs), str(args.inputs)
     else:
@@ -74,8 +75,7 @@ def run(args) -> int:
         v0=args.v0,
         channels=args.channels,
         noise=args.noise,
-        effects=effects,
-        effect_params=params,
+        effects=EffectSettings(enabled=effects, params=params),
         label=label,
     )
     with output_dir(args.out, overwrite=args.overwrite) as d:

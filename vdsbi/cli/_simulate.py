@@ -10,6 +10,7 @@ from pathlib import Path
 from .. import api
 from ..io import InputError, read_recording, write_atomically
 from ..simulator import NOMINAL_THETA, PARAM_NAMES, SEED_TRUE_THETA
+from ..simulator.effects import EffectSettings
 from . import _args
 
 PROFILES = ("seed",)
@@ -64,8 +65,7 @@ def run(args) -> int:
         rec,
         args.vehicle,
         v0=args.v0,
-        effects=effects,
-        effect_params=effect_params,
+        effects=EffectSettings(enabled=effects, params=effect_params),
         noise=args.noise,
         seed=args.seed,
         longitudinal=args.longitudinal,

@@ -15,7 +15,11 @@ from ._design import (
     design_maneuver as design_maneuver,
     design_problem as design_problem,
 )
-from ._fisher import model_fisher as model_fisher, score_fisher_mc as score_fisher_mc
+from ._fisher import (
+    MeasurementModel as MeasurementModel,
+    model_fisher as model_fisher,
+    score_fisher_mc as score_fisher_mc,
+)
 from ._fisher_report import fisher_report as fisher_report, report_markdown as report_markdown
 from ._identifiability import (
     MAX_STD_RATIO as MAX_STD_RATIO,
@@ -25,7 +29,6 @@ from ._identifiability import (
 from ._maneuver import Limits as Limits, Maneuver as Maneuver
 from ._misspecification import (
     Localisation as Localisation,
-    LocaliseSettings as LocaliseSettings,
     MisspecificationTest as MisspecificationTest,
     locate_mismatch as locate_mismatch,
     misspecification_test as misspecification_test,

@@ -23,6 +23,7 @@ physical units.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
@@ -217,6 +218,22 @@ def _inv_psd(a):
     return (v / w) @ v.T
 
 
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class MeasurementModel:
+    """What `model_fisher` measures the maneuver through: the channels and their noise.
+
+    Attributes:
+        channels: measured channels (CHANNELS names).
+        noise: the sensor noise (None: the seed's relative noise, `SensorNoise.seed`).
+        floor_fraction: floor of the relative noise as a fraction of its channel's RMS level
+            (see `noise_std`).
+    """
+
+    channels: Sequence[str] = SEED_CHANNELS
+    noise: SensorNoise | None = None
+    floor_fraction: float = FLOOR_FRACTION
+
+
 def model_fisher(
     model: AbstractVehicleModel,
     theta: Float[Array, "6"],
@@ -224,9 +241,7 @@ def model_fisher(
     v0: float,
     effect_params: tuple = (),
     *,
-    channels: Sequence[str] = SEED_CHANNELS,
-    noise: SensorNoise | None = None,
-    floor_fraction: float = FLOOR_FRACTION,
+    measurement: MeasurementModel = MeasurementModel(),
     solver: AbstractSolver = RK4(),
 ) -> Fisher:
     """Fisher information of θ and the enabled effects' parameters for one maneuver.
@@ -239,13 +254,12 @@ def model_fisher(
         inputs: the maneuver.
         v0: initial speed, m/s.
         effect_params: one (P_e,) vector per enabled effect.
-        channels: measured channels.
-        noise: the sensor noise (default: the seed's relative noise, `SensorNoise.seed`).
-        floor_fraction: relative-noise floor (see `noise_std`).
+        measurement: the measured channels, their noise and its floor (`MeasurementModel`).
         solver: integration settings.
     """
+    channels, floor_fraction = measurement.channels, measurement.floor_fraction
     idx = jnp.asarray([CHANNELS.index(c) for c in channels])
-    rel, add = channel_noise(noise, channels)
+    rel, add = channel_noise(measurement.noise, channels)
     flat = jnp.concatenate(
         [jnp.asarray(theta, dtype=float)] + [jnp.asarray(p, dtype=float) for p in effect_params]
     )

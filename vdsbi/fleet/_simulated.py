@@ -63,6 +63,7 @@ def simulated_fleet(
     import pandas as pd
 
     from ..simulator import CHANNELS, PARAM_NAMES, default_vehicle, random_profile, simulate
+    from ..simulator.effects import EffectSettings
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -84,7 +85,8 @@ def simulated_fleet(
             for attempt in range(50):
                 inp = random_profile(jax.random.fold_in(key, attempt), duration=duration, max_steer=0.03)
                 delay = {"signal_delay": {"delay": values["signal_delay.delay"]}}
-                ys, ok = simulate(theta, inp, veh, v0=15.0, effects=["signal_delay"], effect_params=delay)
+                effects = EffectSettings(enabled=["signal_delay"], params=delay)
+                ys, ok = simulate(theta, inp, veh, v0=15.0, effects=effects)
                 ys = np.asarray(ys)
                 if ok and float(ys[:, CHANNELS.index("vx")].min()) > 5.0:
                     break

@@ -25,6 +25,46 @@ from ._train import Examples, fit
 from ._truncation import truncated_prior
 
 
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RoundSchedule:
+    """The rounds :func:`apt` runs: how many, the simulations in each, and what the rounds after
+    the first propose from.
+
+    Attributes:
+        rounds: total number of rounds (1: amortised NPE).
+        sims_per_round: simulations per round (an int, or one int per round).
+        truncate: TSNPE: propose from the prior truncated to the posterior's HPD region
+            (trained by maximum likelihood) instead of from the posterior (atomic loss).
+    """
+
+    rounds: int
+    sims_per_round: int | Sequence[int]
+    truncate: bool = False
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Execution:
+    """How a run is carried out, apart from what it computes: the callbacks it reports to, the
+    state it resumes from and the devices it trains on. A resumed run continues exactly as the
+    run it was saved from.
+
+    Attributes:
+        on_round_end: called with the new `APTState` after each round (e.g. to checkpoint it
+            with `save_state`).
+        on_epoch_end: ``on_epoch_end(round, epoch, train_loss, val_loss)`` after every
+            training epoch.
+        on_simulate: ``on_simulate(n)`` before each batch of ``n`` simulations.
+        state: resume after the rounds recorded in it (None: start afresh from the key).
+        mesh: 1-D device mesh for data parallelism (None: all devices).
+    """
+
+    on_round_end: Callable[[APTState], None] | None = None
+    on_epoch_end: Callable[[int, int, float, float], None] | None = None
+    on_simulate: Callable[[int], None] | None = None
+    state: APTState | None = None
+    mesh: jax.sharding.Mesh | None = None
+
+
 @dataclasses.dataclass(frozen=True)
 class _Problem:
     """What stays fixed across the rounds of one :func:`apt` call."""
@@ -36,6 +76,7 @@ class _Problem:
     config: NPEConfig
     truncate: bool
     on_epoch_end: Callable[[int, int, float, float], None] | None
+    on_simulate: Callable[[int], None] | None
     mesh: Any
 
 
@@ -46,49 +87,43 @@ def apt(
     x_o,
     *,
     embedding: AbstractEmbedding,
-    rounds: int,
-    sims_per_round: int | Sequence[int],
+    schedule: RoundSchedule,
     config: NPEConfig = NPEConfig(),
-    truncate: bool = False,
-    on_round_end: Callable[[APTState], None] | None = None,
-    on_epoch_end: Callable[[int, int, float, float], None] | None = None,
-    state: APTState | None = None,
-    mesh=None,
+    execution: Execution = Execution(),
 ) -> tuple[Posterior, APTState]:
-    """Automatic posterior transformation (APT / SNPE-C); ``rounds=1`` is amortised NPE.
+    """Automatic posterior transformation (APT / SNPE-C); one round is amortised NPE.
 
     Args:
-        key: PRNG key; the only source of randomness (ignored when resuming from ``state``).
+        key: PRNG key; the only source of randomness (ignored when resuming from
+            ``execution.state``).
         simulate: ``simulate(key, theta (N, d)) -> (x (N, ...), valid (N,) bool)``. Draws with
             ``valid=False`` or non-finite x are excluded from training and counted in the history.
         prior: the uniform box prior.
         x_o: the observation (one example).
         embedding: network mapping one standardised x to the flow's context.
-        rounds: total number of rounds.
-        sims_per_round: simulations per round (an int or one int per round).
+        schedule: the rounds, their simulations and their proposal (`RoundSchedule`).
         config: hyperparameters.
-        truncate: TSNPE — propose from the prior truncated to the posterior's HPD region
-            (trained by maximum likelihood) instead of from the posterior (atomic loss).
-        on_round_end: called with the new state after each round (e.g. for checkpointing).
-        on_epoch_end: ``on_epoch_end(round, epoch, train_loss, val_loss)``.
-        state: resume after the rounds recorded in it.
-        mesh: 1-D device mesh for data parallelism (default: all devices).
+        execution: callbacks, the state to resume from and the device mesh (`Execution`).
 
     Returns:
         ``(posterior at x_o, final state)``.
     """
+    rounds, truncate = schedule.rounds, schedule.truncate
     x_o = on_one_device(x_o)
-    sims = _sims_schedule(sims_per_round, rounds)
+    sims = _sims_schedule(schedule.sims_per_round, rounds)
     if isinstance(config.flow, FlowMatchingSettings) and rounds > 1 and not truncate:
         raise ValueError("flow matching has no atomic (APT) loss: use rounds=1 or truncate=True")
-    mesh = data_mesh() if mesh is None else mesh
-    problem = _Problem(simulate, prior, x_o, embedding, config, truncate, on_epoch_end, mesh)
+    mesh = data_mesh() if execution.mesh is None else execution.mesh
+    problem = _Problem(
+        simulate, prior, x_o, embedding, config, truncate, execution.on_epoch_end, execution.on_simulate, mesh
+    )
+    state = execution.state
     if state is None:
         state = _initial_state(key, prior, x_o)
     for r in range(state.round, rounds):
         state = _run_round(problem, state, r, sims[r])
-        if on_round_end is not None:
-            on_round_end(state)
+        if execution.on_round_end is not None:
+            execution.on_round_end(state)
     if state.flow is None:
         raise ValueError("rounds must be >= 1")
     return Posterior(state.flow, x_o), state
@@ -175,6 +210,8 @@ def _simulate_kept(
     problem: _Problem, key: PRNGKeyArray, theta: Array, n: int
 ) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
     """Simulate ``theta``; keep the valid, finite draws and count the discarded ones."""
+    if problem.on_simulate is not None:
+        problem.on_simulate(theta.shape[0])
     x, valid = problem.simulate(key, theta)
     theta, x = np.asarray(theta, np.float32), np.asarray(x, np.float32)
     valid = np.asarray(valid, bool).reshape(n)

@@ -56,7 +56,7 @@ class SplineFlowSettings:
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class FlowMatchingSettings:
     """A flow-matching estimator (FMPE, `FlowMatchingEstimator`). It has no atomic loss:
-    amortised NPE (``rounds=1``) or TSNPE (``truncate=True``) only.
+    amortised NPE (one round) or TSNPE (`RoundSchedule`'s ``truncate=True``) only.
 
     Attributes:
         hidden, num_blocks, num_freqs: width, residual blocks and time frequencies of the vector
@@ -195,7 +195,7 @@ class SequentialSettings:
         num_atoms: atoms per example in the APT loss (rounds > 1); its cost is linear in it.
             Default: sbi's 10.
         leak: None (default) or a `LeakPenalty` added to the atomic loss.
-        truncation: TSNPE's region for ``truncate=True`` (`Truncation`).
+        truncation: TSNPE's region, for a `RoundSchedule` with ``truncate=True`` (`Truncation`).
     """
 
     patience_over_new_data: bool = True

@@ -2,7 +2,6 @@
 
 import dataclasses
 from collections.abc import Callable
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -12,7 +11,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from ..io import InputError, SimulationError
 from ..simulator import PARAM_NAMES
 from ..simulator.measurement import StochasticSimulator
-from ._apt import apt
+from ._apt import Execution, RoundSchedule, apt
 from ._apt_state import APTState
 from ._config import NPEConfig
 from ._observation import AbstractObservation, TrajectoryCNN
@@ -90,10 +89,7 @@ def identify(
     readings_o: Float[Array, "T C"],
     settings: IdentifySettings = IdentifySettings(),
     *,
-    on_round_end: Callable[[APTState], None] | None = None,
-    on_epoch_end: Callable | None = None,
-    on_simulate: Callable[[int], None] | None = None,
-    state: APTState | None = None,
+    execution: Execution = Execution(),
 ) -> tuple[Posterior, np.ndarray, APTState]:
     """Posterior over θ given one recording's measured channels.
 
@@ -103,9 +99,8 @@ def identify(
         prior: uniform box over θ (PARAM_NAMES order).
         readings_o: observed channels, (T, C) in `simulator.channels` order.
         settings: rounds, budget, embedding.
-        on_round_end / on_epoch_end: progress and checkpoint hooks (see `apt`).
-        on_simulate: called with the number of draws before each simulation batch.
-        state: resume from a checkpoint.
+        execution: progress and checkpoint callbacks, a checkpoint to resume from, the device
+            mesh (see `Execution`).
 
     Returns:
         (posterior at the observation, (num_samples, 6) samples, final APT state).
@@ -128,18 +123,7 @@ def identify(
         ys, ok = simulator(k, jnp.asarray(theta, jnp.float32))
         return obs(ys), ok
 
-    hooks = Hooks(on_round_end, on_epoch_end, on_simulate)
-    return fit_posterior(key, simulate, prior, x_o, settings, hooks=hooks, state=state)
-
-
-class Hooks(NamedTuple):
-    """Progress and checkpoint hooks: ``on_round_end(state)`` and
-    ``on_epoch_end(round, epoch, train_loss, val_loss)`` (see `apt`), and ``on_simulate(n)``
-    before each batch of ``n`` simulations."""
-
-    on_round_end: Callable[[APTState], None] | None = None
-    on_epoch_end: Callable | None = None
-    on_simulate: Callable[[int], None] | None = None
+    return fit_posterior(key, simulate, prior, x_o, settings, execution=execution)
 
 
 def fit_posterior(
@@ -149,20 +133,17 @@ def fit_posterior(
     x_o,
     settings: IdentifySettings,
     *,
-    hooks: Hooks = Hooks(),
-    state: APTState | None = None,
+    execution: Execution = Execution(),
 ) -> tuple[Posterior, np.ndarray, APTState]:
     """APT with `settings`' embedding and budget on `simulate(key, θ) -> (x, ok)` at `x_o`.
 
     Raises:
         SimulationError: fewer than `MIN_USABLE_SIMULATIONS` usable simulations after a round.
     """
-    on_simulate = hooks.on_simulate
+    state = execution.state
     usable = [0 if state is None else int(state.x.shape[0])]
 
     def guarded(k, theta):
-        if on_simulate is not None:
-            on_simulate(theta.shape[0])
         x, ok = simulate(k, theta)
         finite = np.all(np.isfinite(np.asarray(x).reshape(x.shape[0], -1)), axis=1)
         usable[0] += int(np.sum(np.asarray(ok) & finite))
@@ -172,19 +153,18 @@ def fit_posterior(
 
     k_emb, k_apt, k_s = jax.random.split(key, 3)
     embedding = settings.embedding.embedding(k_emb, x_o.shape, settings.embed_dim)
+    schedule = RoundSchedule(
+        rounds=settings.rounds, sims_per_round=settings.sims_per_round, truncate=settings.truncate
+    )
     posterior, state = apt(
         k_apt,
         guarded,
         prior,
         x_o,
         embedding=embedding,
-        rounds=settings.rounds,
-        sims_per_round=settings.sims_per_round,
+        schedule=schedule,
         config=settings.config,
-        truncate=settings.truncate,
-        on_round_end=hooks.on_round_end,
-        on_epoch_end=hooks.on_epoch_end,
-        state=state,
+        execution=execution,
     )
     samples = np.asarray(posterior.sample(k_s, settings.num_samples))
     return posterior, samples, state

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import jax
 import jax.numpy as jnp
@@ -13,10 +13,11 @@ from ..problem import Problem, simulate_draws, windowed_model
 from ..problem.points import split_parameters
 from ..simulator.models import SpeedDriven
 from ..simulator.solvers import Solver
+from ._apt import Execution
 from ._apt_state import APTState
 from ._posterior import Posterior
 from ._prior import BoxPrior
-from ._vehicle import Hooks, IdentifySettings, fit_posterior
+from ._vehicle import IdentifySettings, fit_posterior
 
 
 def input_channels(problem: Problem) -> Float[Array, "W K I"]:
@@ -45,15 +46,13 @@ def identify_problem(
     *,
     effects: Sequence[str] = (),
     solver: Solver = Solver(),
-    on_round_end: Callable[[APTState], None] | None = None,
-    on_epoch_end: Callable | None = None,
-    on_simulate: Callable[[int], None] | None = None,
-    state: APTState | None = None,
+    execution: Execution = Execution(),
 ) -> tuple[Posterior, np.ndarray, APTState]:
     """Posterior over θ from the training part of `problem` (all its windows at once).
 
     With `effects`, their parameters join θ (after the six, in `parameter_names` order) and
-    `prior` must span them too.
+    `prior` must span them too. `execution` holds the progress and checkpoint callbacks, a
+    checkpoint to resume from and the device mesh (see `Execution`).
 
     Simulated draws get white sensor noise at the model rate and then the problem's filter,
     as the measurement does; in torque mode each window's initial speed is jittered by the
@@ -75,5 +74,4 @@ def identify_problem(
         ys, ok = simulate_draws(k, wm, th, sigma_raw=train.sigma_raw, v0_jitter=jitter, effect_params=ep)
         return to_x(flatten_windows(ys, mask).astype(jnp.float32)), ok
 
-    hooks = Hooks(on_round_end, on_epoch_end, on_simulate)
-    return fit_posterior(key, simulate, prior, x_o, settings, hooks=hooks, state=state)
+    return fit_posterior(key, simulate, prior, x_o, settings, execution=execution)

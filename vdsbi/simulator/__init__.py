@@ -10,7 +10,7 @@ speed-driven vector fields and the longitudinal modes), `solvers` (the integrato
 from . import effects as effects, measurement as measurement, models as models, solvers as solvers
 from ._inputs import Inputs as Inputs
 from ._profiles import (
-    constant_profile as constant_profile,
+    SeedManeuver as SeedManeuver,
     random_profile as random_profile,
     seed_profile as seed_profile,
 )

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -9,31 +11,49 @@ import numpy as np
 from ._inputs import Inputs
 
 
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SeedManeuver:
+    """The shape of the seed's maneuver (`seed_profile`): square-wave gas/brake and sinusoidal
+    steer. The seed gives no amplitudes: 0.05 rad of road-wheel angle gives ≈ 3 m/s² lateral
+    acceleration at 10.5 m/s on the default car (inside the tires' linear range), 600 N·m of
+    drive ≈ +1.3 m/s² and 1200 N·m of braking (65 % front, a typical brake balance) ≈ −2.6 m/s².
+
+    Attributes:
+        steer_amplitude: road-wheel angle amplitude, rad.
+        steer_period: period of the steer sine, s.
+        torque_period: period of the gas/brake square wave, s (gas in its first half).
+        drive_torque: front-axle drive torque while on the gas, N·m.
+        brake_torque: total braking torque, N·m.
+        brake_front_share: share of the braking torque on the front axle.
+    """
+
+    steer_amplitude: float = 0.05
+    steer_period: float = 4.0
+    torque_period: float = 5.0
+    drive_torque: float = 600.0
+    brake_torque: float = 1200.0
+    brake_front_share: float = 0.65
+
+
 def seed_profile(
     duration: float = 5.0,
     rate: float = 200.0,
     *,
-    steer_amplitude: float = 0.05,
-    steer_period: float = 4.0,
-    torque_period: float = 5.0,
-    drive_torque: float = 600.0,
-    brake_torque: float = 1200.0,
-    brake_front_share: float = 0.65,
+    maneuver: SeedManeuver = SeedManeuver(),
     t0: float = 0.0,
 ) -> Inputs:
     """The seed's maneuver: square-wave gas/brake (period 5 s), sinusoidal steer (period 4 s).
 
-    Front-wheel drive; braking on both axles. The seed gives no amplitudes: 0.05 rad of
-    road-wheel angle gives ≈ 3 m/s² lateral acceleration at 10.5 m/s on the default car
-    (inside the tires' linear range), 600 N·m of drive ≈ +1.3 m/s² and 1200 N·m of braking
-    (65 % front, a typical brake balance) ≈ −2.6 m/s².
+    Front-wheel drive; braking on both axles. `maneuver` sets its periods and amplitudes
+    (`SeedManeuver`); `duration` s sampled at `rate` Hz from `t0`.
     """
+    m = maneuver
     n = int(round(duration * rate)) + 1
     t = np.arange(n) / rate
-    steer = steer_amplitude * np.sin(2 * np.pi * t / steer_period)
-    gas = (t % torque_period) < torque_period / 2
-    tf = np.where(gas, drive_torque, -brake_front_share * brake_torque)
-    tr = np.where(gas, 0.0, -(1 - brake_front_share) * brake_torque)
+    steer = m.steer_amplitude * np.sin(2 * np.pi * t / m.steer_period)
+    gas = (t % m.torque_period) < m.torque_period / 2
+    tf = np.where(gas, m.drive_torque, -m.brake_front_share * m.brake_torque)
+    tr = np.where(gas, 0.0, -(1 - m.brake_front_share) * m.brake_torque)
     return Inputs(t0, 1.0 / rate, steer, tf, tr)
 
 

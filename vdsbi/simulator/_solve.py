@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 
@@ -17,6 +18,24 @@ from ._inputs import Inputs
 from ._sharding import shard_draws
 from ._solver import RK4, AbstractSolver
 from ._vehicle import PARAM_NAMES, Vehicle
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class EffectSettings:
+    """The effects a simulation enables, and their parameter values.
+
+    Attributes:
+        enabled: names of the effects, applied in this order (see `make_model`).
+        params: {effect: {param: value}} or {effect: vector in the effect's parameter order}
+            for any of the enabled effects; missing parameters take the effect's null values.
+    """
+
+    enabled: Sequence[str] = ()
+    params: Mapping[str, object] = dataclasses.field(default_factory=dict)
+
+    def __post_init__(self):
+        enabled = (self.enabled,) if isinstance(self.enabled, str) else tuple(self.enabled)
+        object.__setattr__(self, "enabled", enabled)
 
 
 def effect_params_from(
@@ -215,8 +234,7 @@ def simulate(
     vehicle: Vehicle,
     *,
     v0: float | None = None,
-    effects: Sequence[str] = (),
-    effect_params: Mapping[str, object] | None = None,
+    effects: EffectSettings = EffectSettings(),
     solver: AbstractSolver = RK4(),
     longitudinal: LongitudinalMode | type[AbstractVehicleModel] = "torque",
     lateral0=None,
@@ -228,8 +246,7 @@ def simulate(
         inputs: driver inputs.
         vehicle: vehicle constants.
         v0: initial speed, m/s (required by `TorqueDriven`; ignored by `SpeedDriven`).
-        effects: names of effects to enable.
-        effect_params: {effect: {param: value}}; missing parameters take null values.
+        effects: the effects to enable and their parameter values (`EffectSettings`).
         solver: the integrator.
         longitudinal: the model class or its mode's name, "torque" or "speed" (see
             `make_model`); `SpeedDriven` needs `inputs.speed` and `inputs.accel`.
@@ -253,8 +270,8 @@ def simulate(
         if lateral0.shape != (2,) or not np.all(np.isfinite(lateral0)):
             raise ValueError(f"lateral0: expected 2 finite values (Vy m/s, r rad/s), got {lateral0!r}")
         lateral0 = jnp.asarray(lateral0, dtype=float)
-    model = make_model(vehicle, effects, cls)
-    _, params = effect_params_from(effects, effect_params)
+    model = make_model(vehicle, effects.enabled, cls)
+    _, params = effect_params_from(effects.enabled, effects.params)
     ys, ok = _solve_one(
         model, jnp.asarray(theta, dtype=float), inputs, jnp.asarray(v0), params, solver, lateral0
     )

@@ -2,7 +2,8 @@
 `register_effect` and the `AbstractEffect` / `Context` / `Param` interface an effect implements
 (one module each in `_effects/`; `promoted` for an effect that writes into the inputs), the
 candidate terms `TERMS` with `term_effect` / `term_formula` that describe a mismatch as a formula,
-and `effect_params_from` (effect modules and parameter vectors from names and values)."""
+`EffectSettings` (the effects a simulation enables and their values) and `effect_params_from`
+(effect modules and parameter vectors from names and values)."""
 
 from ._effects import (
     EFFECTS as EFFECTS,
@@ -16,4 +17,4 @@ from ._effects import (
     term_effect as term_effect,
     term_formula as term_formula,
 )
-from ._solve import effect_params_from as effect_params_from
+from ._solve import EffectSettings as EffectSettings, effect_params_from as effect_params_from
