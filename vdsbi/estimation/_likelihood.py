@@ -309,19 +309,20 @@ def _covariances(data: Problem, mask, jac, r, z, tau):
 
 class _Coordinates(eqx.Module):
     """Where a fit moves: the flattened entries `index` of the point `z0` (the free parameters'
-    unbounded coordinates, padded to a common width, then the corrected windows' start speeds);
-    the other parameters held exactly at `held`'s values."""
+    unbounded coordinates, padded to a common width, then the corrected windows' start speeds),
+    `free` as a mask; the other parameters held exactly at `held`'s values."""
 
     space: Space
     z0: Point
     held: Point
     index: Array
+    free: Point
     width: int = eqx.field(static=True)
 
     def values(self, p):
         """(θ, effect parameters, start-speed offsets) at the fitted entries `p`."""
         z = scatter(self.z0, self.index, p)
-        theta, effect_params = self.space.values(z, self.held, mask_of(z, self.index))
+        theta, effect_params = self.space.values(z, self.held, self.free)
         return theta, effect_params, z.v0
 
 
@@ -334,11 +335,13 @@ def _coordinates(box: Box, effects, z0: np.ndarray, start: np.ndarray, layout: _
     size = len(z0) + n_v
     index = np.concatenate([padded(in_box, layout.width, size), at.v0]).astype(int)
     start = jnp.asarray(start, jnp.float64)
+    z = Point(jnp.asarray(z0[:nt]), jnp.zeros(n_v), jnp.asarray(z0[nt:]))
     return _Coordinates(
         Space.of(box, effects),
-        Point(jnp.asarray(z0[:nt]), jnp.zeros(n_v), jnp.asarray(z0[nt:])),
+        z,
         Point(start[:nt], jnp.zeros(n_v), start[nt:]),
         jnp.asarray(index),
+        mask_of(z, jnp.asarray(index)),
         layout.width,
     )
 
